@@ -1,0 +1,136 @@
+// Internal types shared by the solver's outer loop and its two kernel
+// backends. Not part of the stable API; exposed for the unit tests.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <vector>
+
+#include "normal_fusion/settings.h"
+#include "normal_fusion/types.h"
+
+namespace normal_fusion {
+namespace internal {
+
+/// A problem after input preparation, at one pyramid level: everything the
+/// inner iterations read and never write.
+struct PreparedLevel {
+  int width = 0;
+  int height = 0;
+  int num_inputs = 0;
+  std::vector<PlanarImage> data;          ///< f_l: 3 planes, unit or 0 where missing
+  std::vector<PlanarImage> data_weight;   ///< c_l = lambda * weight_l * conf * valid: 1 plane
+  PlanarImage edge_weight;                ///< w_h (plane 0), w_v (plane 1)
+  std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+  CameraIntrinsics K;
+  ColorImage image;  ///< guide at this level (kept to build the next coarser level)
+  int valid_pixels = 0;
+
+  /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
+  void ray(int x, int y, float r[3]) const {
+    r[0] = static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]);
+    r[1] = static_cast<float>(K_inv[3] * x + K_inv[4] * y + K_inv[5]);
+    r[2] = static_cast<float>(K_inv[6] * x + K_inv[7] * y + K_inv[8]);
+  }
+};
+
+/// Step sizes and model constants of one run of inner iterations.
+struct InnerParams {
+  float tau = 0.0f;
+  float sigma = 0.0f;
+  float huber_eps = 0.0f;
+  DataPenalty penalty = DataPenalty::kL2;
+  bool soft_visibility = false;
+  int num_threads = 1;
+};
+
+/// Variables of the primal-dual iteration (allocated once per size).
+struct IterationState {
+  PlanarImage n0;    ///< linearization point (unit), 3 planes
+  PlanarImage n;     ///< primal iterate on the tangent plane, 3 planes
+  PlanarImage nbar;  ///< over-relaxed primal, 3 planes
+  PlanarImage p_h;   ///< dual of the horizontal differences, 3 planes
+  PlanarImage p_v;   ///< dual of the vertical differences, 3 planes
+  std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
+  // Scratch of the reference backend: gradients, divergence, data-dual sum.
+  PlanarImage grad_h, grad_v, div, q_sum;
+
+  void resize(int width, int height, int num_inputs);
+};
+
+/// Runs `iterations` Chambolle-Pock iterations on the tangent plane at n0.
+/// Reference backend: one plain function per step of the maths.
+void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+                       IterationState& state, int iterations);
+/// Fast backend: fused per-pixel passes, multithreaded.
+void runInnerFast(const PreparedLevel& level, const InnerParams& params,
+                  IterationState& state, int iterations);
+
+/// Projection onto C = {n : n0 . n = 1} (and n . r <= 0 when `soft`).
+/// Closed form: project on the plane; if the half-space is violated, project
+/// within the plane onto the line where n . r = 0.
+inline void projectTangentFeasible(const float n0[3], const float r[3],
+                                   bool soft, float v[3]) {
+  // Plane n0 . n = 1: v <- v - (n0 . v - 1) n0.
+  const float off = n0[0] * v[0] + n0[1] * v[1] + n0[2] * v[2] - 1.0f;
+  v[0] -= off * n0[0];
+  v[1] -= off * n0[1];
+  v[2] -= off * n0[2];
+  if (!soft) return;
+  const float rv = r[0] * v[0] + r[1] * v[1] + r[2] * v[2];
+  if (rv <= 0.0f) return;
+  // Within the plane: r_t = r - (n0 . r) n0; v <- v - (r . v / |r_t|^2) r_t.
+  const float rn0 = r[0] * n0[0] + r[1] * n0[1] + r[2] * n0[2];
+  const float rt[3] = {r[0] - rn0 * n0[0], r[1] - rn0 * n0[1],
+                       r[2] - rn0 * n0[2]};
+  const float rt2 = rt[0] * rt[0] + rt[1] * rt[1] + rt[2] * rt[2];
+  if (rt2 <= 1e-20f) return;  // n0 is parallel to r: the half-space is inactive
+  const float s = rv / rt2;
+  v[0] -= s * rt[0];
+  v[1] -= s * rt[1];
+  v[2] -= s * rt[2];
+}
+
+/// Projects a unit normal onto the visible set n . r <= 0 (in place):
+/// n <- (r x n) x r = n |r|^2 - r (r . n), normalized; -r/|r| if degenerate.
+inline void projectVisible(const float r[3], float n[3]) {
+  const float rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
+  if (rn <= 0.0f) return;
+  const float r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+  float m[3] = {n[0] * r2 - r[0] * rn, n[1] * r2 - r[1] * rn,
+                n[2] * r2 - r[2] * rn};
+  float len = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+  if (len <= 1e-6f * r2) {
+    const float rl = std::sqrt(r2);
+    n[0] = -r[0] / rl;
+    n[1] = -r[1] / rl;
+    n[2] = -r[2] / rl;
+    return;
+  }
+  n[0] = m[0] / len;
+  n[1] = m[1] / len;
+  n[2] = m[2] / len;
+}
+
+namespace reference {
+/// The single steps of the reference iteration (exposed for the unit tests).
+void gradient(const PlanarImage& n, PlanarImage& grad_h, PlanarImage& grad_v);
+void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
+                PlanarImage& div);
+void clampVector(float v[3], float radius);
+void proxHuberDual(PlanarImage& p, const PlanarImage& grad,
+                   const float* weight, float sigma, float eps);
+void proxDataDual(PlanarImage& q, const PlanarImage& nbar,
+                  const PlanarImage& f, const float* c_weight, float sigma,
+                  DataPenalty penalty);
+void primalStep(const PreparedLevel& level, const InnerParams& params,
+                const PlanarImage& div, const PlanarImage& q_sum,
+                const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
+}  // namespace reference
+
+/// E(n) of ALGORITHM.md on a prepared level (double accumulation).
+double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
+              const PlanarImage& normals, int num_threads);
+
+}  // namespace internal
+}  // namespace normal_fusion

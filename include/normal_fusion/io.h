@@ -1,0 +1,45 @@
+// Files in and out: normal maps (EXR, PFM, colour-coded PNG), images, camera_info YAML.
+#pragma once
+
+#include <string>
+
+#include "normal_fusion/types.h"
+
+namespace normal_fusion {
+namespace io {
+
+/// Reads a normal map. Float files (.exr, .pfm): three channels x, y, z in the
+/// order OpenCV's imread returns them (no BGR/RGB swap), NaN = missing.
+/// 8-bit files (.png and others): colour-coded, c = (n + 1) / 2 * 255 with
+/// x -> R, y -> G, z -> B, black (0,0,0) = missing; decoded vectors are normalized.
+/// Throws InputError with the path and the problem.
+NormalMap readNormalMap(const std::string& path);
+
+/// Writes a float normal map (.exr or .pfm by extension; NaN kept).
+void writeNormalMap(const std::string& path, const NormalMap& normals);
+
+/// Colour coding of a normal map: 3 planes R, G, B in [0, 1], black where missing.
+ColorImage colorCode(const NormalMap& normals);
+/// Writes the colour-coded picture (8-bit PNG).
+void writeNormalPicture(const std::string& path, const NormalMap& normals);
+
+/// Reads an 8- or 16-bit grey or colour image into planes in [0, 1]
+/// (3 planes R, G, B for colour, 1 plane for grey).
+ColorImage readImage(const std::string& path);
+/// Writes a 1- or 3-plane [0, 1] image as 8-bit (PNG by extension).
+void writeImage(const std::string& path, const ColorImage& image);
+/// Writes a scalar map as a false-colour picture with values mapped from
+/// [lo, hi] (NaN black), for error images.
+void writeHeatmap(const std::string& path, const ScalarMap& values, double lo,
+                  double hi);
+
+/// Reads intrinsics from a camera_info YAML in the ROS camera_calibration
+/// format (camera_matrix: {rows: 3, cols: 3, data: [...]}, image_width,
+/// image_height). Throws InputError.
+CameraIntrinsics readCameraInfo(const std::string& path, int* width = nullptr,
+                                int* height = nullptr);
+void writeCameraInfo(const std::string& path, const CameraIntrinsics& K,
+                     int width, int height, const std::string& camera_name = "camera");
+
+}  // namespace io
+}  // namespace normal_fusion

@@ -1,0 +1,94 @@
+// Every setting of the solver in one plain struct with documented defaults.
+#pragma once
+
+#include <string>
+
+namespace normal_fusion {
+
+/// Penalty phi of each data term.
+enum class DataPenalty {
+  kL2,         ///< |n - f|_2, robust (the paper's default)
+  kSquaredL2,  ///< |n - f|_2^2 / 2, equals 1 - cos(angle) for unit vectors
+};
+
+/// How the camera intrinsics constrain the normals (all must face the camera).
+enum class VisibilityMode {
+  kOff,   ///< no constraint
+  kHard,  ///< observations facing away from the camera get weight 0
+  kSoft,  ///< every iterate is kept in n . r <= 0 (observations still pull)
+};
+
+/// Which image gradient drives the edge weights.
+enum class EdgeColorMode {
+  kLuminance,  ///< gradient of the Rec. 601 luminance
+  kColorMax,   ///< per direction, the largest gradient magnitude of R, G and B
+};
+
+/// Shape of the edge-weight function of the gradient magnitude g.
+enum class EdgeWeightFunction {
+  kExponential,  ///< exp(-alpha g^beta)
+  kRational,     ///< 1 / (1 + alpha g^beta)
+};
+
+/// Which implementation runs the inner iterations.
+enum class SolverBackend {
+  kFast,       ///< fused, multithreaded kernels
+  kReference,  ///< plain, readable kernels: the oracle the fast path is tested against
+};
+
+struct EdgeWeightSettings {
+  bool enabled = true;  ///< false: w_h = w_v = 1 (plain, unguided TV)
+  double smoothing_sigma = 1.2;  ///< Gaussian pre-smoothing in pixels (0: none)
+  double alpha = 10.0;
+  double beta = 1.0;
+  double w_min = 0.01;  ///< floor of the weights, in [0, 1]
+  EdgeColorMode color_mode = EdgeColorMode::kLuminance;
+  EdgeWeightFunction function = EdgeWeightFunction::kExponential;
+};
+
+struct SolverSettings {
+  // Model.
+  double lambda = 1.0;      ///< global data weight (the paper's lambda)
+  double huber_eps = 0.05;  ///< Huber threshold; 0 = plain total variation
+  DataPenalty penalty = DataPenalty::kL2;
+  VisibilityMode visibility = VisibilityMode::kSoft;
+  EdgeWeightSettings edges;
+
+  // Iterations and stopping.
+  int inner_iterations = 50;        ///< Chambolle-Pock iterations per outer step
+  int max_outer_iterations = 40;    ///< majorize-minimize steps (cap)
+  int max_total_inner_iterations = 1000;  ///< cap over all outer steps and levels
+  double relative_tolerance = 1e-4;  ///< stop when (E_prev - E) / E_prev falls below
+  double time_budget_ms = 0.0;       ///< wall-clock budget; 0 = none (anytime)
+
+  /// Coarse-to-fine levels on a cold start: 1 = off, 0 = automatic (used when
+  /// some pixels have no valid input), n > 1 = exactly n levels (fewer if the
+  /// image gets too small).
+  int pyramid_levels = 0;
+
+  // Execution.
+  int num_threads = 0;  ///< 0 = all hardware threads
+  SolverBackend backend = SolverBackend::kFast;
+  /// Step sizes; 0 = automatic (tau = sigma = 0.99 / sqrt(8 + L)). When set,
+  /// tau * sigma * (8 + L) must be below 1.
+  double tau = 0.0;
+  double sigma = 0.0;
+
+  /// Throws ParameterError naming the first setting that is out of range.
+  void validate() const;
+};
+
+/// Parses "l2" / "squared_l2", "off" / "hard" / "soft", "luminance" / "color_max",
+/// "exponential" / "rational", "fast" / "reference". Throws ParameterError.
+DataPenalty parseDataPenalty(const std::string& name);
+VisibilityMode parseVisibilityMode(const std::string& name);
+EdgeColorMode parseEdgeColorMode(const std::string& name);
+EdgeWeightFunction parseEdgeWeightFunction(const std::string& name);
+SolverBackend parseSolverBackend(const std::string& name);
+std::string toString(DataPenalty value);
+std::string toString(VisibilityMode value);
+std::string toString(EdgeColorMode value);
+std::string toString(EdgeWeightFunction value);
+std::string toString(SolverBackend value);
+
+}  // namespace normal_fusion

@@ -1,0 +1,103 @@
+// The variational regularizer and fuser of surface-normal maps
+// (Huber-TV on unit vectors, majorize-minimize, Chambolle-Pock).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "normal_fusion/settings.h"
+#include "normal_fusion/types.h"
+
+namespace normal_fusion {
+
+/// One normal-map input of a fusion problem.
+struct NormalInput {
+  NormalMap normals;      ///< 3 planes, as the producer gives them
+  ScalarMap confidence;   ///< optional 1 plane in [0, 1] (empty = 1 everywhere)
+  double weight = 1.0;    ///< global weight of this data term (>= 0)
+  Orientation orientation;  ///< applied on input: n_optical = M n_input
+};
+
+/// What one frame gives the solver.
+struct FusionProblem {
+  ColorImage image;       ///< guide image, 1 or 3 planes in [0, 1]
+  CameraIntrinsics K;     ///< intrinsics of the image
+  std::vector<NormalInput> inputs;  ///< L >= 1 inputs, in priority order
+};
+
+/// Solver state carried from frame to frame (warm start): the normals and all
+/// dual variables, in global 3-D coordinates.
+struct SolverState {
+  NormalMap normals;                 ///< 3 planes, unit length
+  PlanarImage dual_h;                ///< p_h, 3 planes
+  PlanarImage dual_v;                ///< p_v, 3 planes
+  std::vector<PlanarImage> dual_data;  ///< q_l, 3 planes each
+
+  /// True when the state can warm-start a problem of this size and input count.
+  bool compatible(int width, int height, int num_inputs) const;
+  void clear();
+};
+
+/// What a solve did.
+struct SolveReport {
+  int outer_iterations = 0;  ///< outer steps at the finest level
+  int rejected_outer_steps = 0;  ///< steps whose normalized result raised E (kept n0)
+  int inner_iterations = 0;  ///< Chambolle-Pock iterations at the finest level
+  int coarse_inner_iterations = 0;  ///< iterations on the coarser pyramid levels
+  std::vector<double> energies;  ///< E at the finest level: start, then each accepted outer step
+  double initial_energy = 0.0;
+  double final_energy = 0.0;
+  double seconds = 0.0;
+  bool warm_started = false;
+  bool converged = false;         ///< stopped on the relative tolerance
+  bool budget_exhausted = false;  ///< stopped on the wall-clock budget
+  int pyramid_levels = 1;
+  int num_inputs = 0;
+  int valid_pixels = 0;   ///< pixels with at least one usable observation
+  int filled_pixels = 0;  ///< pixels without any (filled in by the regularizer)
+};
+
+class SolverImpl;
+
+/// Solves frame after frame, reusing its buffers. Not thread-safe: one solve at
+/// a time per instance.
+class Solver {
+ public:
+  explicit Solver(const SolverSettings& settings = SolverSettings());
+  ~Solver();
+  Solver(Solver&&) noexcept;
+  Solver& operator=(Solver&&) noexcept;
+
+  /// Validates and replaces the settings (throws ParameterError, keeping the old
+  /// ones). Takes effect on the next solve.
+  void setSettings(const SolverSettings& settings);
+  const SolverSettings& settings() const;
+
+  /// Solves one frame. On return `state` holds the fused unit normals (every
+  /// pixel) and the duals. With `warm_start` and a compatible `state`, starts
+  /// from it; otherwise cold-starts (see SolveReport::warm_started).
+  /// Throws InputError on bad input; `state` is then left unchanged.
+  SolveReport solve(const FusionProblem& problem, SolverState& state,
+                    bool warm_start = false);
+
+  /// Convenience: cold start, returns the fused normals.
+  NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);
+
+ private:
+  std::unique_ptr<SolverImpl> impl_;
+};
+
+/// Checks a problem; throws InputError saying what was expected and what came.
+void validateProblem(const FusionProblem& problem);
+
+/// Edge weights w_h, w_v (2 planes: 0 = horizontal, 1 = vertical) of an image.
+PlanarImage computeEdgeWeights(const ColorImage& image,
+                               const EdgeWeightSettings& settings);
+
+/// The energy E(n) of ALGORITHM.md for the given normals (need not be unit),
+/// with the problem's inputs prepared as the solver prepares them (orientation,
+/// validity, confidence, hard visibility).
+double computeEnergy(const FusionProblem& problem,
+                     const SolverSettings& settings, const NormalMap& normals);
+
+}  // namespace normal_fusion

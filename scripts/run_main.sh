@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# The main job: sets up, builds, and runs the evaluation on the synthetic scenes
+# (prints the accuracy table and writes it with a plot into results/).
+set -euo pipefail
+export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+ws="${NF_WS:-$repo/build/ws}"
+
+bash "$repo/scripts/build.sh"
+out="${1:-$repo/results}"
+mkdir -p "$out"
+"$ws/devel/lib/normal_fusion/evaluate" --output-dir "$out" "${@:2}"

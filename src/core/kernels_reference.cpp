@@ -1,0 +1,165 @@
+// Reference backend: the Chambolle-Pock iteration written step by step, one
+// plain single-threaded function per operator. It is the oracle that the fast
+// backend is tested against; keep it simple rather than fast.
+#include <cmath>
+
+#include "normal_fusion/detail/solver_internal.h"
+
+namespace normal_fusion {
+namespace internal {
+
+void IterationState::resize(int width, int height, int num_inputs) {
+  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v,
+                             &div, &q_sum}) {
+    image->resize(width, height, 3);
+  }
+  q.resize(num_inputs);
+  for (PlanarImage& q_l : q) q_l.resize(width, height, 3);
+}
+
+namespace reference {
+
+/// Forward differences with Neumann ends: grad_h n(x,y) = n(x+1,y) - n(x,y),
+/// 0 on the last column; grad_v likewise down the rows.
+void gradient(const PlanarImage& n, PlanarImage& grad_h, PlanarImage& grad_v) {
+  const int W = n.width(), H = n.height();
+  for (int c = 0; c < 3; ++c) {
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        grad_h.at(c, y, x) = x + 1 < W ? n.at(c, y, x + 1) - n.at(c, y, x) : 0;
+        grad_v.at(c, y, x) = y + 1 < H ? n.at(c, y + 1, x) - n.at(c, y, x) : 0;
+      }
+    }
+  }
+}
+
+/// Divergence, the negative adjoint of gradient(): backward differences with
+/// Dirichlet ends, div_h p(x) = p(x) - p(x-1), p(-1) = 0, p(W-1) read as 0.
+void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
+                PlanarImage& div) {
+  const int W = p_h.width(), H = p_h.height();
+  for (int c = 0; c < 3; ++c) {
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const float h_here = x + 1 < W ? p_h.at(c, y, x) : 0.0f;
+        const float h_left = x > 0 ? p_h.at(c, y, x - 1) : 0.0f;
+        const float v_here = y + 1 < H ? p_v.at(c, y, x) : 0.0f;
+        const float v_up = y > 0 ? p_v.at(c, y - 1, x) : 0.0f;
+        div.at(c, y, x) = (h_here - h_left) + (v_here - v_up);
+      }
+    }
+  }
+}
+
+/// clamp_c(v) = v / max(1, |v| / c); c = 0 gives 0.
+void clampVector(float v[3], float radius) {
+  if (!(radius > 0.0f)) {
+    v[0] = v[1] = v[2] = 0.0f;
+    return;
+  }
+  const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  if (len > radius) {
+    const float s = radius / len;
+    v[0] *= s;
+    v[1] *= s;
+    v[2] *= s;
+  }
+}
+
+/// Dual step of the weighted Huber term (prox of sigma (w huber_eps)^*):
+/// p <- clamp_w((p + sigma grad nbar) / (1 + sigma eps / w)).
+void proxHuberDual(PlanarImage& p, const PlanarImage& grad,
+                   const float* weight, float sigma, float eps) {
+  const std::size_t N = p.pixelCount();
+  for (std::size_t i = 0; i < N; ++i) {
+    const float w = weight[i];
+    const float shrink = w > 0.0f ? 1.0f / (1.0f + sigma * eps / w) : 0.0f;
+    float v[3];
+    for (int c = 0; c < 3; ++c) {
+      v[c] = (p.plane(c)[i] + sigma * grad.plane(c)[i]) * shrink;
+    }
+    clampVector(v, w);
+    for (int c = 0; c < 3; ++c) p.plane(c)[i] = v[c];
+  }
+}
+
+/// Dual step of one data term (prox of sigma F_l^*, F_l(z) = c phi(z - f)):
+/// unsquared: q <- clamp_c(q + sigma (nbar - f));
+/// squared:   q <- (q + sigma (nbar - f)) / (1 + sigma / c).
+void proxDataDual(PlanarImage& q, const PlanarImage& nbar,
+                  const PlanarImage& f, const float* c_weight, float sigma,
+                  DataPenalty penalty) {
+  const std::size_t N = q.pixelCount();
+  for (std::size_t i = 0; i < N; ++i) {
+    const float c_w = c_weight[i];
+    float v[3];
+    for (int c = 0; c < 3; ++c) {
+      v[c] = q.plane(c)[i] + sigma * (nbar.plane(c)[i] - f.plane(c)[i]);
+    }
+    if (penalty == DataPenalty::kL2) {
+      clampVector(v, c_w);
+    } else {
+      const float s = c_w > 0.0f ? 1.0f / (1.0f + sigma / c_w) : 0.0f;
+      for (float& value : v) value *= s;
+    }
+    for (int c = 0; c < 3; ++c) q.plane(c)[i] = v[c];
+  }
+}
+
+/// Primal step: n <- Proj_C(n + tau (div p - sum_l q_l)), C the tangent plane
+/// at n0 (intersected with n . r <= 0 in soft visibility mode); then
+/// nbar <- 2 n - n_old.
+void primalStep(const PreparedLevel& level, const InnerParams& params,
+                const PlanarImage& div, const PlanarImage& q_sum,
+                const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar) {
+  const int W = n.width(), H = n.height();
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      float v[3], n0_px[3], r[3], n_old[3];
+      for (int c = 0; c < 3; ++c) {
+        n_old[c] = n.at(c, y, x);
+        n0_px[c] = n0.at(c, y, x);
+        v[c] = n_old[c] + params.tau * (div.at(c, y, x) - q_sum.at(c, y, x));
+      }
+      level.ray(x, y, r);
+      projectTangentFeasible(n0_px, r, params.soft_visibility, v);
+      for (int c = 0; c < 3; ++c) {
+        n.at(c, y, x) = v[c];
+        nbar.at(c, y, x) = 2.0f * v[c] - n_old[c];
+      }
+    }
+  }
+}
+
+}  // namespace reference
+
+void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+                       IterationState& s, int iterations) {
+  const std::size_t N = s.n.pixelCount();
+  for (int it = 0; it < iterations; ++it) {
+    // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d nbar).
+    reference::gradient(s.nbar, s.grad_h, s.grad_v);
+    reference::proxHuberDual(s.p_h, s.grad_h, level.edge_weight.plane(0),
+                             params.sigma, params.huber_eps);
+    reference::proxHuberDual(s.p_v, s.grad_v, level.edge_weight.plane(1),
+                             params.sigma, params.huber_eps);
+    // Dual ascent on each data term: q_l <- prox(q_l + sigma (nbar - f_l)).
+    s.q_sum.fill(0.0f);
+    for (int l = 0; l < level.num_inputs; ++l) {
+      reference::proxDataDual(s.q[l], s.nbar, level.data[l],
+                              level.data_weight[l].plane(0), params.sigma,
+                              params.penalty);
+      for (int c = 0; c < 3; ++c) {
+        for (std::size_t i = 0; i < N; ++i) {
+          s.q_sum.plane(c)[i] += s.q[l].plane(c)[i];
+        }
+      }
+    }
+    // Primal descent: n <- Proj_C(n + tau (div p - sum q)), over-relaxation.
+    reference::divergence(s.p_h, s.p_v, s.div);
+    reference::primalStep(level, params, s.div, s.q_sum, s.n0, s.n, s.nbar);
+  }
+}
+
+}  // namespace internal
+}  // namespace normal_fusion

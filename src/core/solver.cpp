@@ -1,0 +1,630 @@
+// The solver's outer loop: input preparation, initialization, the coarse-to-fine
+// pyramid, and the majorize-minimize iteration around the Chambolle-Pock
+// inner solver (kernels_reference.cpp / kernels_fast.cpp).
+#include "normal_fusion/solver.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "normal_fusion/detail/solver_internal.h"
+#include "normal_fusion/errors.h"
+
+namespace normal_fusion {
+
+using internal::InnerParams;
+using internal::IterationState;
+using internal::PreparedLevel;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string sizeText(const PlanarImage& image) {
+  std::ostringstream s;
+  s << image.width() << "x" << image.height() << "x" << image.channels();
+  return s.str();
+}
+
+int resolveThreads(int requested) {
+  return requested > 0 ? requested : std::max(1, omp_get_num_procs());
+}
+
+/// Validates the problem and builds the finest level: f_l in the optical
+/// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
+/// (0 where facing away in hard mode), and the edge weights.
+PreparedLevel prepareFinest(const FusionProblem& problem,
+                            const SolverSettings& settings) {
+  validateProblem(problem);
+  PreparedLevel level;
+  const int W = problem.image.width(), H = problem.image.height();
+  const std::size_t N = problem.image.pixelCount();
+  level.width = W;
+  level.height = H;
+  level.num_inputs = static_cast<int>(problem.inputs.size());
+  level.K = problem.K;
+  level.K_inv = problem.K.inverse();
+  level.image = problem.image;
+  level.edge_weight = computeEdgeWeights(problem.image, settings.edges);
+  level.data.resize(level.num_inputs);
+  level.data_weight.resize(level.num_inputs);
+
+  std::vector<unsigned char> any_valid(N, 0);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    const NormalInput& input = problem.inputs[l];
+    PlanarImage& f = level.data[l];
+    PlanarImage& c = level.data_weight[l];
+    f.resize(W, H, 3);
+    c.resize(W, H, 1);
+    const auto& M = input.orientation.M;
+    const float global = static_cast<float>(settings.lambda * input.weight);
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        const float in[3] = {input.normals.plane(0)[i],
+                             input.normals.plane(1)[i],
+                             input.normals.plane(2)[i]};
+        float conf = input.confidence.empty() ? 1.0f : input.confidence.plane(0)[i];
+        conf = std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
+        float out[3] = {0.0f, 0.0f, 0.0f};
+        float weight = 0.0f;
+        if (isValidNormal(in[0], in[1], in[2]) && std::isfinite(in[0]) &&
+            std::isfinite(in[1]) && std::isfinite(in[2])) {
+          // Producer's convention to the optical frame: n = M n_in, normalized.
+          for (int r = 0; r < 3; ++r) {
+            out[r] = M[3 * r] * in[0] + M[3 * r + 1] * in[1] + M[3 * r + 2] * in[2];
+          }
+          const float len =
+              std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2]);
+          for (float& v : out) v /= len;
+          weight = global * conf;
+          if (settings.visibility == VisibilityMode::kHard) {
+            float r[3];
+            level.ray(x, y, r);
+            if (r[0] * out[0] + r[1] * out[1] + r[2] * out[2] > 0.0f) {
+              weight = 0.0f;  // facing away from the camera: ignored
+            }
+          }
+        }
+        if (weight <= 0.0f) {
+          out[0] = out[1] = out[2] = 0.0f;
+          weight = 0.0f;
+        }
+        for (int ch = 0; ch < 3; ++ch) f.plane(ch)[i] = out[ch];
+        c.plane(0)[i] = weight;
+        if (weight > 0.0f) any_valid[i] = 1;
+      }
+    }
+  }
+  level.valid_pixels = static_cast<int>(
+      std::count(any_valid.begin(), any_valid.end(), static_cast<unsigned char>(1)));
+  return level;
+}
+
+/// The next coarser level: 2x2 blocks, validity-weighted means of the data
+/// (normalized), weights averaged and doubled (the data term scales with area,
+/// the smoothness term with length), K scaled, edge weights recomputed.
+PreparedLevel downsample(const PreparedLevel& fine,
+                         const SolverSettings& settings) {
+  PreparedLevel coarse;
+  const int W = (fine.width + 1) / 2, H = (fine.height + 1) / 2;
+  coarse.width = W;
+  coarse.height = H;
+  coarse.num_inputs = fine.num_inputs;
+  coarse.K = fine.K.scaled(static_cast<double>(W) / fine.width,
+                           static_cast<double>(H) / fine.height);
+  coarse.K_inv = coarse.K.inverse();
+  coarse.image.resize(W, H, fine.image.channels());
+  coarse.data.resize(fine.num_inputs);
+  coarse.data_weight.resize(fine.num_inputs);
+  for (int l = 0; l < fine.num_inputs; ++l) {
+    coarse.data[l].resize(W, H, 3);
+    coarse.data_weight[l].resize(W, H, 1);
+  }
+  std::vector<unsigned char> any_valid(static_cast<std::size_t>(W) * H, 0);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = static_cast<std::size_t>(y) * W + x;
+      int count = 0;
+      double img_sum[3] = {0, 0, 0};
+      std::vector<double> f_sum(3 * fine.num_inputs, 0.0), c_sum(fine.num_inputs, 0.0);
+      for (int dy = 0; dy < 2; ++dy) {
+        for (int dx = 0; dx < 2; ++dx) {
+          const int fx = 2 * x + dx, fy = 2 * y + dy;
+          if (fx >= fine.width || fy >= fine.height) continue;
+          ++count;
+          for (int c = 0; c < fine.image.channels(); ++c) {
+            img_sum[c] += fine.image.at(c, fy, fx);
+          }
+          for (int l = 0; l < fine.num_inputs; ++l) {
+            const float cw = fine.data_weight[l].at(0, fy, fx);
+            c_sum[l] += cw;
+            for (int c = 0; c < 3; ++c) {
+              f_sum[3 * l + c] += cw * fine.data[l].at(c, fy, fx);
+            }
+          }
+        }
+      }
+      for (int c = 0; c < fine.image.channels(); ++c) {
+        coarse.image.plane(c)[j] = static_cast<float>(img_sum[c] / count);
+      }
+      for (int l = 0; l < fine.num_inputs; ++l) {
+        const double len = std::sqrt(f_sum[3 * l] * f_sum[3 * l] +
+                                     f_sum[3 * l + 1] * f_sum[3 * l + 1] +
+                                     f_sum[3 * l + 2] * f_sum[3 * l + 2]);
+        const bool ok = c_sum[l] > 0.0 && len > 1e-9;
+        for (int c = 0; c < 3; ++c) {
+          coarse.data[l].plane(c)[j] =
+              ok ? static_cast<float>(f_sum[3 * l + c] / len) : 0.0f;
+        }
+        coarse.data_weight[l].plane(0)[j] =
+            ok ? static_cast<float>(2.0 * c_sum[l] / count) : 0.0f;
+        if (ok) any_valid[j] = 1;
+      }
+    }
+  }
+  coarse.valid_pixels = static_cast<int>(
+      std::count(any_valid.begin(), any_valid.end(), static_cast<unsigned char>(1)));
+  coarse.edge_weight = computeEdgeWeights(coarse.image, settings.edges);
+  return coarse;
+}
+
+/// Cold start: the first input with a usable observation (projected onto the
+/// visible set in soft mode), else -r/|r|.
+void initializeCold(const PreparedLevel& level, VisibilityMode mode,
+                    PlanarImage& n) {
+  n.resize(level.width, level.height, 3);
+  for (int y = 0; y < level.height; ++y) {
+    for (int x = 0; x < level.width; ++x) {
+      float v[3], r[3];
+      level.ray(x, y, r);
+      bool found = false;
+      for (int l = 0; l < level.num_inputs && !found; ++l) {
+        if (level.data_weight[l].at(0, y, x) > 0.0f) {
+          for (int c = 0; c < 3; ++c) v[c] = level.data[l].at(c, y, x);
+          found = true;
+        }
+      }
+      if (!found) {
+        const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+        for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+      } else if (mode == VisibilityMode::kSoft) {
+        internal::projectVisible(r, v);
+      }
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    }
+  }
+}
+
+/// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
+/// normalizes, and projects onto the visible set in soft mode.
+void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
+                     VisibilityMode mode, PlanarImage& n) {
+  n.resize(fine.width, fine.height, 3);
+  const double sx = static_cast<double>(coarse.width()) / fine.width;
+  const double sy = static_cast<double>(coarse.height()) / fine.height;
+  for (int y = 0; y < fine.height; ++y) {
+    const double cy = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0),
+                               coarse.height() - 1.0);
+    const int y0 = static_cast<int>(cy);
+    const int y1 = std::min(y0 + 1, coarse.height() - 1);
+    const float ty = static_cast<float>(cy - y0);
+    for (int x = 0; x < fine.width; ++x) {
+      const double cx = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0),
+                                 coarse.width() - 1.0);
+      const int x0 = static_cast<int>(cx);
+      const int x1 = std::min(x0 + 1, coarse.width() - 1);
+      const float tx = static_cast<float>(cx - x0);
+      float v[3];
+      for (int c = 0; c < 3; ++c) {
+        v[c] = (1 - ty) * ((1 - tx) * coarse.at(c, y0, x0) + tx * coarse.at(c, y0, x1)) +
+               ty * ((1 - tx) * coarse.at(c, y1, x0) + tx * coarse.at(c, y1, x1));
+      }
+      float r[3];
+      fine.ray(x, y, r);
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      if (len > 1e-6f) {
+        for (float& value : v) value /= len;
+      } else {
+        const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+        for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+      }
+      if (mode == VisibilityMode::kSoft) internal::projectVisible(r, v);
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    }
+  }
+}
+
+/// n <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
+/// tangent plane).
+void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
+  out.resize(n.width(), n.height(), 3);
+  const long N = static_cast<long>(n.pixelCount());
+  const float* nx = n.plane(0);
+  const float* ny = n.plane(1);
+  const float* nz = n.plane(2);
+  float* ox = out.plane(0);
+  float* oy = out.plane(1);
+  float* oz = out.plane(2);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (long i = 0; i < N; ++i) {
+    const float inv = 1.0f / std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+    ox[i] = nx[i] * inv;
+    oy[i] = ny[i] * inv;
+    oz[i] = nz[i] * inv;
+  }
+}
+
+}  // namespace
+
+namespace internal {
+
+double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
+              const PlanarImage& normals, int num_threads) {
+  const int W = level.width, H = level.height;
+  const double eps = huber_eps;
+  auto huber = [eps](double z) {
+    return z < eps ? z * z / (2.0 * eps) : z - 0.5 * eps;
+  };
+  double total = 0.0;
+#pragma omp parallel for num_threads(num_threads) reduction(+ : total) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    double row_sum = 0.0;
+    for (int x = 0; x < W; ++x) {
+      const double n[3] = {normals.at(0, y, x), normals.at(1, y, x),
+                           normals.at(2, y, x)};
+      // Data terms: sum_l c_l phi(n - f_l).
+      for (int l = 0; l < level.num_inputs; ++l) {
+        const double c = level.data_weight[l].at(0, y, x);
+        if (c <= 0.0) continue;
+        double d2 = 0.0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const double d = n[ch] - level.data[l].at(ch, y, x);
+          d2 += d * d;
+        }
+        row_sum += penalty == DataPenalty::kL2 ? c * std::sqrt(d2) : c * 0.5 * d2;
+      }
+      // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n).
+      if (x + 1 < W) {
+        double g2 = 0.0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const double g = normals.at(ch, y, x + 1) - n[ch];
+          g2 += g * g;
+        }
+        row_sum += level.edge_weight.at(0, y, x) * huber(std::sqrt(g2));
+      }
+      if (y + 1 < H) {
+        double g2 = 0.0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const double g = normals.at(ch, y + 1, x) - n[ch];
+          g2 += g * g;
+        }
+        row_sum += level.edge_weight.at(1, y, x) * huber(std::sqrt(g2));
+      }
+    }
+    total += row_sum;
+  }
+  return total;
+}
+
+}  // namespace internal
+
+void validateProblem(const FusionProblem& problem) {
+  const ColorImage& image = problem.image;
+  if (image.empty() || image.width() < 2 || image.height() < 2) {
+    throw InputError("image: expected at least 2x2 pixels, got " +
+                     sizeText(image));
+  }
+  if (image.channels() != 1 && image.channels() != 3) {
+    throw InputError("image: expected 1 (grey) or 3 (RGB) channels, got " +
+                     std::to_string(image.channels()));
+  }
+  const std::size_t total = image.pixelCount() * image.channels();
+  for (std::size_t i = 0; i < total; ++i) {
+    if (!std::isfinite(image.data()[i])) {
+      throw InputError("image: expected finite intensities, found a non-finite value");
+    }
+  }
+  problem.K.validate();
+  if (problem.inputs.empty()) {
+    throw InputError("inputs: expected at least one normal map (no data terms given)");
+  }
+  for (std::size_t l = 0; l < problem.inputs.size(); ++l) {
+    const NormalInput& in = problem.inputs[l];
+    const std::string name = "input " + std::to_string(l);
+    if (in.normals.channels() != 3) {
+      throw InputError(name + ": expected 3 channels (x, y, z), got " +
+                       std::to_string(in.normals.channels()));
+    }
+    if (!in.normals.sameSize(image)) {
+      throw InputError(name + ": expected the image's size " +
+                       std::to_string(image.width()) + "x" +
+                       std::to_string(image.height()) + ", got " +
+                       sizeText(in.normals));
+    }
+    if (!in.confidence.empty() &&
+        (in.confidence.channels() != 1 || !in.confidence.sameSize(image))) {
+      throw InputError(name + ": expected a 1-channel confidence of the image's size, got " +
+                       sizeText(in.confidence));
+    }
+    if (!std::isfinite(in.weight) || in.weight < 0.0) {
+      std::ostringstream msg;
+      msg << name << ": weight = " << in.weight << ", expected a finite value >= 0";
+      throw ParameterError(msg.str());
+    }
+    in.orientation.validate();
+  }
+}
+
+bool SolverState::compatible(int width, int height, int num_inputs) const {
+  return normals.width() == width && normals.height() == height &&
+         normals.channels() == 3 && dual_h.sameSize(normals) &&
+         dual_v.sameSize(normals) &&
+         static_cast<int>(dual_data.size()) == num_inputs &&
+         std::all_of(dual_data.begin(), dual_data.end(),
+                     [this](const PlanarImage& q) { return q.sameSize(normals); });
+}
+
+void SolverState::clear() {
+  normals = NormalMap();
+  dual_h = PlanarImage();
+  dual_v = PlanarImage();
+  dual_data.clear();
+}
+
+class SolverImpl {
+ public:
+  explicit SolverImpl(const SolverSettings& settings) : settings_(settings) {
+    settings_.validate();
+  }
+
+  SolverSettings settings_;
+
+  SolveReport solve(const FusionProblem& problem, SolverState& out, bool warm) {
+    const Clock::time_point start = Clock::now();
+    const bool has_budget = settings_.time_budget_ms > 0.0;
+    deadline_ = start + std::chrono::duration_cast<Clock::duration>(
+                            std::chrono::duration<double, std::milli>(
+                                settings_.time_budget_ms));
+    has_deadline_ = has_budget;
+    threads_ = resolveThreads(settings_.num_threads);
+
+    SolveReport report;
+    std::vector<PreparedLevel> levels;
+    levels.push_back(prepareFinest(problem, settings_));
+    const PreparedLevel& finest = levels.front();
+    const int W = finest.width, H = finest.height, L = finest.num_inputs;
+    if (finest.valid_pixels == 0) {
+      throw InputError(
+          "inputs: no valid observation in any input (all missing, zero weight "
+          "or, in hard visibility mode, facing away from the camera)");
+    }
+    report.num_inputs = L;
+    report.valid_pixels = finest.valid_pixels;
+    report.filled_pixels = static_cast<int>(finest.width * finest.height) -
+                           finest.valid_pixels;
+
+    const bool use_warm = warm && out.compatible(W, H, L);
+    report.warm_started = use_warm;
+    remaining_inner_ = settings_.max_total_inner_iterations;
+
+    if (!use_warm) {
+      // Coarse-to-fine on a cold start.
+      int wanted = settings_.pyramid_levels;
+      if (wanted == 0) {
+        const double missing = 1.0 - static_cast<double>(finest.valid_pixels) /
+                                         (static_cast<double>(W) * H);
+        wanted = missing > 0.005 ? 5 : 1;
+      }
+      while (static_cast<int>(levels.size()) < wanted &&
+             std::min(levels.back().width, levels.back().height) >= 32) {
+        levels.push_back(downsample(levels.back(), settings_));
+      }
+    }
+    report.pyramid_levels = static_cast<int>(levels.size());
+
+    IterationState& s = state_;
+    PlanarImage coarse_result;
+    for (int li = static_cast<int>(levels.size()) - 1; li >= 0; --li) {
+      const PreparedLevel& level = levels[li];
+      s.resize(level.width, level.height, level.num_inputs);
+      const bool finest_level = li == 0;
+      if (finest_level && use_warm) {
+        // Warm start: previous normals (sanitized) and duals.
+        s.n0 = out.normals;
+        sanitizeWarmNormals(level, s.n0);
+        s.p_h = out.dual_h;
+        s.p_v = out.dual_v;
+        for (int l = 0; l < L; ++l) s.q[l] = out.dual_data[l];
+      } else {
+        if (li + 1 < static_cast<int>(levels.size())) {
+          upsampleNormals(coarse_result, level, settings_.visibility, s.n0);
+        } else {
+          initializeCold(level, settings_.visibility, s.n0);
+        }
+        s.p_h.fill(0.0f);
+        s.p_v.fill(0.0f);
+        for (PlanarImage& q : s.q) q.fill(0.0f);
+      }
+      runLevel(level, s, finest_level, report);
+      if (!finest_level) coarse_result = s.n0;
+    }
+
+    // Output: the accepted (unit) normals and the duals for the next frame.
+    out.normals = s.n0;
+    out.dual_h = s.p_h;
+    out.dual_v = s.p_v;
+    out.dual_data = s.q;
+    report.final_energy = report.energies.back();
+    report.seconds =
+        std::chrono::duration<double>(Clock::now() - start).count();
+    return report;
+  }
+
+ private:
+  IterationState state_;
+  PlanarImage candidate_;
+  Clock::time_point deadline_;
+  bool has_deadline_ = false;
+  int threads_ = 1;
+  int remaining_inner_ = 0;
+
+  bool pastDeadline() const {
+    return has_deadline_ && Clock::now() >= deadline_;
+  }
+
+  void sanitizeWarmNormals(const PreparedLevel& level, PlanarImage& n) {
+    for (int y = 0; y < level.height; ++y) {
+      for (int x = 0; x < level.width; ++x) {
+        float v[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
+        float r[3];
+        level.ray(x, y, r);
+        const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        if (!(len > 1e-6f) || !std::isfinite(len)) {
+          const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+          for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+        } else {
+          for (float& value : v) value /= len;
+        }
+        if (settings_.visibility == VisibilityMode::kSoft) {
+          internal::projectVisible(r, v);
+        }
+        for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+      }
+    }
+  }
+
+  /// Majorize-minimize at one level: inner iterations on the tangent plane at
+  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
+  void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
+                SolveReport& report) {
+    InnerParams params;
+    const double K_norm2 = 8.0 + level.num_inputs;
+    if (settings_.tau > 0.0) {
+      if (settings_.tau * settings_.sigma * K_norm2 >= 1.0) {
+        std::ostringstream msg;
+        msg << "settings tau = " << settings_.tau << ", sigma = " << settings_.sigma
+            << ": expected tau * sigma * (8 + L) < 1, got "
+            << settings_.tau * settings_.sigma * K_norm2;
+        throw ParameterError(msg.str());
+      }
+      params.tau = static_cast<float>(settings_.tau);
+      params.sigma = static_cast<float>(settings_.sigma);
+    } else {
+      params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(K_norm2));
+    }
+    params.huber_eps = static_cast<float>(settings_.huber_eps);
+    params.penalty = settings_.penalty;
+    params.soft_visibility = settings_.visibility == VisibilityMode::kSoft;
+    params.num_threads = threads_;
+
+    auto energy_of = [&](const PlanarImage& n) {
+      return internal::energy(level, settings_.huber_eps, settings_.penalty, n,
+                              threads_);
+    };
+    double best = energy_of(s.n0);
+    if (finest) {
+      report.initial_energy = best;
+      report.energies.push_back(best);
+    }
+    s.n = s.n0;
+    s.nbar = s.n0;
+    // Each level may use the whole iteration cap; coarse levels are cheap.
+    int remaining = finest ? remaining_inner_ : settings_.max_total_inner_iterations;
+    const int chunk = has_deadline_ ? 2 : settings_.inner_iterations;
+    for (int outer = 0; outer < settings_.max_outer_iterations && remaining > 0;
+         ++outer) {
+      int done = 0;
+      const int target = std::min(settings_.inner_iterations, remaining);
+      bool out_of_time = false;
+      while (done < target) {
+        const int k = std::min(chunk, target - done);
+        if (settings_.backend == SolverBackend::kReference) {
+          internal::runInnerReference(level, params, s, k);
+        } else {
+          internal::runInnerFast(level, params, s, k);
+        }
+        done += k;
+        if (pastDeadline()) {
+          out_of_time = true;
+          break;
+        }
+      }
+      remaining -= done;
+      if (finest) {
+        report.inner_iterations += done;
+        report.outer_iterations += 1;
+      } else {
+        report.coarse_inner_iterations += done;
+      }
+      // Re-linearize: the normalized iterate replaces n0 when E does not rise.
+      normalizeInto(s.n, candidate_, threads_);
+      const double e = energy_of(candidate_);
+      bool converged = false;
+      if (e <= best) {
+        const double decrease = (best - e) / std::max(best, 1e-30);
+        best = e;
+        std::swap(s.n0, candidate_);
+        s.n = s.n0;
+        s.nbar = s.n0;
+        if (finest) report.energies.push_back(e);
+        converged = decrease < settings_.relative_tolerance;
+      } else if (finest) {
+        report.rejected_outer_steps += 1;
+      }
+      if (out_of_time) {
+        report.budget_exhausted = true;
+        break;
+      }
+      if (converged) {
+        if (finest) report.converged = true;
+        break;
+      }
+    }
+    if (finest) remaining_inner_ = remaining;
+  }
+};
+
+Solver::Solver(const SolverSettings& settings)
+    : impl_(std::make_unique<SolverImpl>(settings)) {}
+Solver::~Solver() = default;
+Solver::Solver(Solver&&) noexcept = default;
+Solver& Solver::operator=(Solver&&) noexcept = default;
+
+void Solver::setSettings(const SolverSettings& settings) {
+  settings.validate();
+  impl_->settings_ = settings;
+}
+
+const SolverSettings& Solver::settings() const { return impl_->settings_; }
+
+SolveReport Solver::solve(const FusionProblem& problem, SolverState& state,
+                          bool warm_start) {
+  return impl_->solve(problem, state, warm_start);
+}
+
+NormalMap Solver::solve(const FusionProblem& problem, SolveReport* report) {
+  SolverState state;
+  SolveReport r = impl_->solve(problem, state, false);
+  if (report != nullptr) *report = r;
+  return std::move(state.normals);
+}
+
+double computeEnergy(const FusionProblem& problem,
+                     const SolverSettings& settings, const NormalMap& normals) {
+  settings.validate();
+  const PreparedLevel level = prepareFinest(problem, settings);
+  if (normals.channels() != 3 || normals.width() != level.width ||
+      normals.height() != level.height) {
+    throw InputError("computeEnergy: expected normals of the image's size with "
+                     "3 channels, got " + sizeText(normals));
+  }
+  return internal::energy(level, settings.huber_eps, settings.penalty, normals,
+                          resolveThreads(settings.num_threads));
+}
+
+}  // namespace normal_fusion

@@ -1,0 +1,252 @@
+// The maths of one iteration: adjointness, proximal steps against their closed
+// forms, the tangent-plane projection, and the fast backend against the
+// reference.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "normal_fusion/detail/solver_internal.h"
+#include "test_util.h"
+
+namespace normal_fusion {
+namespace {
+
+using internal::reference::clampVector;
+using internal::reference::divergence;
+using internal::reference::gradient;
+
+double dot(const PlanarImage& a, const PlanarImage& b) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < a.pixelCount() * a.channels(); ++i) {
+    sum += static_cast<double>(a.data()[i]) * b.data()[i];
+  }
+  return sum;
+}
+
+TEST(Kernels, DivergenceIsTheNegativeAdjointOfGradient) {
+  for (const auto& size : {std::make_pair(17, 11), std::make_pair(1, 9),
+                           std::make_pair(8, 1), std::make_pair(64, 48)}) {
+    const int W = size.first, H = size.second;
+    const PlanarImage n = test::randomImage(W, H, 3, 1);
+    const PlanarImage p_h = test::randomImage(W, H, 3, 2);
+    const PlanarImage p_v = test::randomImage(W, H, 3, 3);
+    PlanarImage g_h(W, H, 3), g_v(W, H, 3), div(W, H, 3);
+    gradient(n, g_h, g_v);
+    divergence(p_h, p_v, div);
+    // <grad n, p> = -<n, div p>, with p(W-1) and p(H-1) read as 0.
+    PlanarImage p_h_masked = p_h, p_v_masked = p_v;
+    for (int c = 0; c < 3; ++c) {
+      for (int y = 0; y < H; ++y) {
+        p_h_masked.at(c, y, W - 1) = 0.0f;
+      }
+      for (int x = 0; x < W; ++x) p_v_masked.at(c, H - 1, x) = 0.0f;
+    }
+    const double lhs = dot(g_h, p_h) + dot(g_v, p_v);
+    const double rhs = -dot(n, div);
+    EXPECT_NEAR(lhs, rhs, 1e-4 * (std::abs(lhs) + 1.0)) << W << "x" << H;
+    // The last column/row of p never enters either side.
+    const double lhs_masked = dot(g_h, p_h_masked) + dot(g_v, p_v_masked);
+    EXPECT_NEAR(lhs, lhs_masked, 1e-6 * (std::abs(lhs) + 1.0));
+  }
+}
+
+TEST(Kernels, GradientOfConstantIsZeroAndDetectsRamp) {
+  PlanarImage n(5, 4, 3, 0.5f);
+  PlanarImage g_h(5, 4, 3), g_v(5, 4, 3);
+  gradient(n, g_h, g_v);
+  for (std::size_t i = 0; i < g_h.pixelCount() * 3; ++i) {
+    EXPECT_EQ(g_h.data()[i], 0.0f);
+    EXPECT_EQ(g_v.data()[i], 0.0f);
+  }
+  for (int x = 0; x < 5; ++x) n.at(0, 2, x) = static_cast<float>(x);
+  gradient(n, g_h, g_v);
+  EXPECT_FLOAT_EQ(g_h.at(0, 2, 1), 1.0f);
+  EXPECT_FLOAT_EQ(g_h.at(0, 2, 4), 0.0f);  // Neumann end
+}
+
+TEST(Kernels, ClampIsTheProjectionOntoTheBall) {
+  float v[3] = {3.0f, 4.0f, 0.0f};
+  clampVector(v, 1.0f);
+  EXPECT_NEAR(v[0], 0.6f, 1e-6);
+  EXPECT_NEAR(v[1], 0.8f, 1e-6);
+  float inside[3] = {0.1f, 0.2f, 0.2f};
+  clampVector(inside, 1.0f);
+  EXPECT_FLOAT_EQ(inside[1], 0.2f);
+  float zero_radius[3] = {1.0f, 2.0f, 3.0f};
+  clampVector(zero_radius, 0.0f);
+  EXPECT_EQ(zero_radius[0], 0.0f);
+  EXPECT_EQ(zero_radius[2], 0.0f);
+}
+
+/// prox of sigma (w huber_eps)^* at v is argmin_p |p - v|^2 / (2 sigma) +
+/// eps / (2w) |p|^2 over |p| <= w; compare with a brute-force minimization
+/// along the ray of v (the minimizer is a multiple of v).
+TEST(Kernels, HuberDualProxMatchesItsDefinition) {
+  const float sigma = 0.3f, eps = 0.05f;
+  for (float w : {0.01f, 0.5f, 1.0f}) {
+    for (float len : {0.001f, 0.2f, 0.9f, 3.0f}) {
+      PlanarImage p(1, 1, 3, 0.0f), grad(1, 1, 3, 0.0f);
+      const float dir[3] = {0.48f, -0.6f, 0.64f};
+      for (int c = 0; c < 3; ++c) grad.plane(c)[0] = dir[c] * len / sigma;
+      internal::reference::proxHuberDual(p, grad, &w, sigma, eps);
+      // Brute force: p = t dir, t in [0, w].
+      double best_t = 0.0, best = 1e300;
+      for (int k = 0; k <= 200000; ++k) {
+        const double t = w * k / 200000.0;
+        const double obj = (t - len) * (t - len) / (2.0 * sigma) + eps / (2.0 * w) * t * t;
+        if (obj < best) {
+          best = obj;
+          best_t = t;
+        }
+      }
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(p.plane(c)[0], best_t * dir[c], 1e-4) << "w=" << w << " len=" << len;
+      }
+    }
+  }
+}
+
+TEST(Kernels, DataDualProxMatchesClosedForms) {
+  const float sigma = 0.25f;
+  for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
+    for (float c_w : {0.0f, 0.3f, 2.0f}) {
+      PlanarImage q(1, 1, 3), nbar(1, 1, 3), f(1, 1, 3);
+      const float q0[3] = {0.2f, -0.1f, 0.4f}, nb[3] = {0.0f, 0.6f, -0.8f},
+                  f0[3] = {0.6f, 0.0f, -0.8f};
+      for (int c = 0; c < 3; ++c) {
+        q.plane(c)[0] = q0[c];
+        nbar.plane(c)[0] = nb[c];
+        f.plane(c)[0] = f0[c];
+      }
+      internal::reference::proxDataDual(q, nbar, f, &c_w, sigma, penalty);
+      float v[3];
+      for (int c = 0; c < 3; ++c) v[c] = q0[c] + sigma * (nb[c] - f0[c]);
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      for (int c = 0; c < 3; ++c) {
+        // unsquared: projection onto |q| <= c; squared: argmin |q - v|^2/(2 sigma) + |q|^2/(2c).
+        const float expected = penalty == DataPenalty::kL2
+                                   ? (len > c_w ? v[c] * c_w / len : v[c])
+                                   : (c_w > 0 ? v[c] * c_w / (c_w + sigma) : 0.0f);
+        EXPECT_NEAR(q.plane(c)[0], expected, 1e-6);
+      }
+    }
+  }
+}
+
+TEST(Kernels, TangentProjectionLandsOnPlaneAndVisibleSet) {
+  const float n0[3] = {0.0f, 0.6f, -0.8f};
+  const float r[3] = {0.3f, -0.2f, 1.0f};
+  float v[3] = {0.9f, 1.2f, 0.5f};
+  internal::projectTangentFeasible(n0, r, true, v);
+  EXPECT_NEAR(n0[0] * v[0] + n0[1] * v[1] + n0[2] * v[2], 1.0f, 1e-5);
+  EXPECT_LE(r[0] * v[0] + r[1] * v[1] + r[2] * v[2], 1e-5);
+  // It is the closest such point: compare with random feasible points.
+  const float y[3] = {0.9f, 1.2f, 0.5f};
+  const double d_proj = std::pow(v[0] - y[0], 2) + std::pow(v[1] - y[1], 2) +
+                        std::pow(v[2] - y[2], 2);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-3, 3);
+  for (int k = 0; k < 2000; ++k) {
+    float z[3] = {u(rng), u(rng), u(rng)};
+    internal::projectTangentFeasible(n0, r, false, z);  // onto the plane
+    if (r[0] * z[0] + r[1] * z[1] + r[2] * z[2] > 0) continue;
+    const double d = std::pow(z[0] - y[0], 2) + std::pow(z[1] - y[1], 2) +
+                     std::pow(z[2] - y[2], 2);
+    EXPECT_GE(d, d_proj - 1e-5);
+  }
+}
+
+TEST(Kernels, VisibleProjectionIsOnTheBoundary) {
+  const float r[3] = {0.1f, 0.2f, 1.0f};
+  float n[3] = {0.0f, 0.0f, 1.0f};  // facing away
+  internal::projectVisible(r, n);
+  EXPECT_NEAR(r[0] * n[0] + r[1] * n[1] + r[2] * n[2], 0.0f, 1e-5);
+  EXPECT_NEAR(n[0] * n[0] + n[1] * n[1] + n[2] * n[2], 1.0f, 1e-5);
+}
+
+/// Builds a random level with L inputs (some missing) for backend comparisons.
+internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed) {
+  internal::PreparedLevel level;
+  level.width = W;
+  level.height = H;
+  level.num_inputs = L;
+  level.K = CameraIntrinsics(0.9 * W, 0.9 * W, W / 2.0, H / 2.0);
+  level.K_inv = level.K.inverse();
+  level.edge_weight = test::randomImage(W, H, 2, seed);
+  for (std::size_t i = 0; i < level.edge_weight.pixelCount() * 2; ++i) {
+    level.edge_weight.data()[i] = 0.01f + std::abs(level.edge_weight.data()[i]);
+  }
+  for (int l = 0; l < L; ++l) {
+    PlanarImage f = test::randomImage(W, H, 3, seed + 10 + l);
+    PlanarImage c = test::randomImage(W, H, 1, seed + 20 + l);
+    for (std::size_t i = 0; i < f.pixelCount(); ++i) {
+      float v[3] = {f.plane(0)[i], f.plane(1)[i], -std::abs(f.plane(2)[i]) - 0.2f};
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      const bool missing = c.plane(0)[i] < -0.7f;
+      for (int k = 0; k < 3; ++k) f.plane(k)[i] = missing ? 0.0f : v[k] / len;
+      c.plane(0)[i] = missing ? 0.0f : std::abs(c.plane(0)[i]);
+    }
+    level.data.push_back(f);
+    level.data_weight.push_back(c);
+  }
+  return level;
+}
+
+void initState(const internal::PreparedLevel& level, internal::IterationState& s) {
+  s.resize(level.width, level.height, level.num_inputs);
+  s.n0 = level.data[0];
+  for (std::size_t i = 0; i < s.n0.pixelCount(); ++i) {
+    if (level.data_weight[0].plane(0)[i] <= 0.0f) {
+      s.n0.plane(0)[i] = 0.0f;
+      s.n0.plane(1)[i] = 0.0f;
+      s.n0.plane(2)[i] = -1.0f;
+    }
+  }
+  s.n = s.n0;
+  s.nbar = s.n0;
+  s.p_h.fill(0.0f);
+  s.p_v.fill(0.0f);
+  for (auto& q : s.q) q.fill(0.0f);
+}
+
+class FastMatchesReference
+    : public ::testing::TestWithParam<std::tuple<int, DataPenalty, bool>> {};
+
+TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
+  const int L = std::get<0>(GetParam());
+  const auto level = randomLevel(37, 23, L, 42 + L);
+  internal::InnerParams params;
+  params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(8.0 + L));
+  params.huber_eps = 0.05f;
+  params.penalty = std::get<1>(GetParam());
+  params.soft_visibility = std::get<2>(GetParam());
+  params.num_threads = 2;
+  internal::IterationState ref, fast;
+  initState(level, ref);
+  initState(level, fast);
+  internal::runInnerReference(level, params, ref, 60);
+  internal::runInnerFast(level, params, fast, 60);
+  double max_diff = 0.0;
+  for (const auto& pair : {std::make_pair(&ref.n, &fast.n),
+                           std::make_pair(&ref.p_h, &fast.p_h),
+                           std::make_pair(&ref.p_v, &fast.p_v),
+                           std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
+    for (std::size_t i = 0; i < pair.first->pixelCount() * 3; ++i) {
+      max_diff = std::max(max_diff, static_cast<double>(std::abs(
+                                        pair.first->data()[i] - pair.second->data()[i])));
+    }
+  }
+  EXPECT_LT(max_diff, 1e-4);
+  const double e_ref = internal::energy(level, 0.05, params.penalty, ref.n, 1);
+  const double e_fast = internal::energy(level, 0.05, params.penalty, fast.n, 1);
+  EXPECT_NEAR(e_fast, e_ref, 1e-4 * std::abs(e_ref));
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Backends, FastMatchesReference,
+    ::testing::Combine(::testing::Values(1, 2, 3),
+                       ::testing::Values(DataPenalty::kL2, DataPenalty::kSquaredL2),
+                       ::testing::Values(false, true)));
+
+}  // namespace
+}  // namespace normal_fusion
