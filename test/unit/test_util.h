@@ -30,6 +30,25 @@ inline FusionProblem twoPlaneScene(int W, int H, NormalMap* gt) {
   return problem;
 }
 
+/// A W x H view of a vertical cylinder filling the image: the normal turns
+/// smoothly from 60 degrees left to 60 degrees right; shaded image.
+inline FusionProblem cylinderScene(int W, int H, NormalMap* gt) {
+  FusionProblem problem;
+  problem.K = CameraIntrinsics(0.9 * W, 0.9 * W, (W - 1) / 2.0, (H - 1) / 2.0);
+  problem.image = ColorImage(W, H, 1);
+  gt->resize(W, H, 3);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const float theta = (2.0f * x / (W - 1) - 1.0f) * 1.0472f;
+      gt->at(0, y, x) = std::sin(theta);
+      gt->at(1, y, x) = 0.0f;
+      gt->at(2, y, x) = -std::cos(theta);
+      problem.image.at(0, y, x) = 0.2f + 0.6f * std::cos(theta);
+    }
+  }
+  return problem;
+}
+
 /// Random values in [-scale, scale] in every channel.
 inline PlanarImage randomImage(int W, int H, int channels, std::uint64_t seed,
                                float scale = 1.0f) {

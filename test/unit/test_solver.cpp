@@ -1,0 +1,442 @@
+// Behaviour of the whole solver: monotone energy, unit output, visibility,
+// fill-in, fusion, warm start, backends, and typed errors on bad input.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/solver.h"
+#include "test_util.h"
+
+namespace normal_fusion {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+FusionProblem noisyTwoPlanes(int W, int H, double sigma, NormalMap* gt,
+                             std::uint64_t seed = 7) {
+  FusionProblem problem = test::twoPlaneScene(W, H, gt);
+  NormalInput input;
+  input.normals = test::noisy(*gt, sigma, seed);
+  problem.inputs.push_back(input);
+  return problem;
+}
+
+float dot3(const NormalMap& n, std::size_t i, const float r[3]) {
+  return n.plane(0)[i] * r[0] + n.plane(1)[i] * r[1] + n.plane(2)[i] * r[2];
+}
+
+void expectUnit(const NormalMap& n) {
+  for (std::size_t i = 0; i < n.pixelCount(); ++i) {
+    const float len2 = n.plane(0)[i] * n.plane(0)[i] + n.plane(1)[i] * n.plane(1)[i] +
+                       n.plane(2)[i] * n.plane(2)[i];
+    ASSERT_NEAR(len2, 1.0f, 1e-4) << "pixel " << i;
+  }
+}
+
+TEST(Solver, EnergyNeverIncreasesAcrossOuterSteps) {
+  for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
+    for (VisibilityMode mode : {VisibilityMode::kOff, VisibilityMode::kSoft}) {
+      NormalMap gt;
+      FusionProblem problem = noisyTwoPlanes(48, 32, 0.6, &gt);
+      SolverSettings settings;
+      settings.penalty = penalty;
+      settings.visibility = mode;
+      settings.inner_iterations = 300;  // enough to approach each tangent minimizer
+      settings.max_outer_iterations = 8;
+      settings.max_total_inner_iterations = 100000;
+      settings.relative_tolerance = 0.0;
+      settings.pyramid_levels = 1;
+      Solver solver(settings);
+      SolveReport report;
+      solver.solve(problem, &report);
+      ASSERT_GE(report.energies.size(), 2u);
+      // Every tangent-plane solve, normalized, lowered E: none was rejected.
+      EXPECT_EQ(report.rejected_outer_steps, 0);
+      EXPECT_EQ(report.outer_iterations, 8);
+      for (std::size_t k = 1; k < report.energies.size(); ++k) {
+        EXPECT_LE(report.energies[k], report.energies[k - 1] * (1.0 + 1e-6))
+            << "outer step " << k;
+      }
+      EXPECT_LT(report.final_energy, 0.5 * report.initial_energy);
+    }
+  }
+}
+
+TEST(Solver, OutputIsUnitLengthAndDenoises) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  Solver solver;
+  SolveReport report;
+  const NormalMap fused = solver.solve(problem, &report);
+  expectUnit(fused);
+  const double mse_in = test::meanSquaredError(problem.inputs[0].normals, gt);
+  const double mse_out = test::meanSquaredError(fused, gt);
+  EXPECT_LT(mse_out, 0.1 * mse_in);
+  EXPECT_GT(report.inner_iterations, 0);
+  EXPECT_EQ(report.num_inputs, 1);
+}
+
+TEST(Solver, SoftVisibilityMakesEveryNormalFaceTheCamera) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(48, 32, 0.9, &gt);
+  // Some observations face away: flip a block of them.
+  for (int y = 5; y < 15; ++y) {
+    for (int x = 5; x < 20; ++x) {
+      for (int c = 0; c < 3; ++c) problem.inputs[0].normals.at(c, y, x) *= -1.0f;
+    }
+  }
+  SolverSettings settings;
+  settings.visibility = VisibilityMode::kSoft;
+  Solver solver(settings);
+  const NormalMap fused = solver.solve(problem);
+  const auto K_inv = problem.K.inverse();
+  for (int y = 0; y < fused.height(); ++y) {
+    for (int x = 0; x < fused.width(); ++x) {
+      const float r[3] = {static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]),
+                          static_cast<float>(K_inv[3] * x + K_inv[4] * y + K_inv[5]),
+                          static_cast<float>(K_inv[6] * x + K_inv[7] * y + K_inv[8])};
+      ASSERT_LE(dot3(fused, static_cast<std::size_t>(y) * fused.width() + x, r), 1e-5f)
+          << "(" << x << ", " << y << ")";
+    }
+  }
+  // Off mode lets flipped observations through (checks that the test can fail).
+  settings.visibility = VisibilityMode::kOff;
+  settings.lambda = 5.0;
+  Solver off(settings);
+  const NormalMap fused_off = off.solve(problem);
+  int facing_away = 0;
+  for (std::size_t i = 0; i < fused_off.pixelCount(); ++i) {
+    facing_away += fused_off.plane(2)[i] > 0.0f;
+  }
+  EXPECT_GT(facing_away, 0);
+}
+
+TEST(Solver, HardVisibilityIgnoresInfeasibleObservations) {
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(40, 30, &gt);
+  NormalInput input;
+  input.normals = gt;
+  // A block of observations that face away from the camera (flipped).
+  for (int y = 10; y < 20; ++y) {
+    for (int x = 2; x < 12; ++x) {
+      for (int c = 0; c < 3; ++c) input.normals.at(c, y, x) = -gt.at(c, y, x);
+    }
+  }
+  problem.inputs.push_back(input);
+  SolverSettings settings;
+  settings.visibility = VisibilityMode::kHard;
+  settings.lambda = 10.0;  // data would dominate if it were used
+  Solver solver(settings);
+  SolveReport report;
+  const NormalMap fused = solver.solve(problem, &report);
+  EXPECT_EQ(report.filled_pixels, 100);
+  // The block is filled from its neighbours: close to the ground truth.
+  for (int y = 10; y < 20; ++y) {
+    for (int x = 2; x < 12; ++x) {
+      float d = 0.0f;
+      for (int c = 0; c < 3; ++c) d += fused.at(c, y, x) * gt.at(c, y, x);
+      EXPECT_GT(d, std::cos(5.0f * 3.14159f / 180.0f)) << x << "," << y;
+    }
+  }
+  // Energy counts no data term where the observation was ignored.
+  const double e_gt = computeEnergy(problem, settings, gt);
+  SolverSettings off_settings = settings;
+  off_settings.visibility = VisibilityMode::kOff;
+  EXPECT_LT(e_gt, computeEnergy(problem, off_settings, gt));
+}
+
+TEST(Solver, ZeroWeightPixelsAreFilledFromNeighbours) {
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(64, 48, &gt);
+  NormalInput input;
+  input.normals = test::noisy(gt, 0.1, 3);
+  input.confidence = ScalarMap(64, 48, 1, 1.0f);
+  // A NaN hole and a zero-vector hole on the left plane, a zero-confidence hole
+  // on the right one.
+  for (int y = 10; y < 30; ++y) {
+    for (int x = 4; x < 24; ++x) {
+      for (int c = 0; c < 3; ++c) input.normals.at(c, y, x) = y < 20 ? kNaN : 0.0f;
+    }
+    for (int x = 40; x < 60; ++x) input.confidence.at(0, y, x) = 0.0f;
+  }
+  problem.inputs.push_back(input);
+  Solver solver;
+  SolveReport report;
+  const NormalMap fused = solver.solve(problem, &report);
+  expectUnit(fused);
+  EXPECT_EQ(report.filled_pixels, 800);
+  EXPECT_GT(report.pyramid_levels, 1);
+  for (int y = 10; y < 30; ++y) {
+    for (int x : {4, 14, 23, 40, 50, 59}) {
+      float d = 0.0f;
+      for (int c = 0; c < 3; ++c) d += fused.at(c, y, x) * gt.at(c, y, x);
+      EXPECT_GT(d, std::cos(5.0f * 3.14159f / 180.0f)) << x << "," << y;
+    }
+  }
+}
+
+TEST(Solver, FusingDenseNoisyWithSparseAccurateBeatsEither) {
+  NormalMap gt;
+  FusionProblem problem = test::cylinderScene(64, 48, &gt);
+  NormalInput dense;
+  dense.normals = test::noisy(gt, 0.5, 11);
+  NormalInput sparse;
+  sparse.normals = test::noisy(gt, 0.03, 12);
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (std::size_t i = 0; i < gt.pixelCount(); ++i) {
+    if (u(rng) > 0.05f) {
+      for (int c = 0; c < 3; ++c) sparse.normals.plane(c)[i] = kNaN;
+    }
+  }
+  sparse.weight = 4.0;
+  dense.weight = 0.25;  // weights reflect each input's accuracy
+  SolverSettings settings;
+  auto solve_with = [&](std::vector<NormalInput> inputs) {
+    FusionProblem p = problem;
+    p.inputs = std::move(inputs);
+    Solver solver(settings);
+    return test::meanSquaredError(solver.solve(p), gt);
+  };
+  const double mse_dense = solve_with({dense});
+  const double mse_sparse = solve_with({sparse});
+  const double mse_both = solve_with({dense, sparse});
+  EXPECT_LT(mse_both, mse_dense);
+  EXPECT_LT(mse_both, mse_sparse);
+}
+
+TEST(Solver, WarmStartFromConvergedStateNeedsFarFewerIterations) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings;
+  settings.inner_iterations = 20;
+  settings.relative_tolerance = 1e-4;
+  settings.max_total_inner_iterations = 5000;
+  settings.max_outer_iterations = 250;
+  Solver solver(settings);
+  SolverState state;
+  const SolveReport cold = solver.solve(problem, state, false);
+  ASSERT_TRUE(cold.converged);
+  EXPECT_FALSE(cold.warm_started);
+  const SolveReport warm = solver.solve(problem, state, true);
+  EXPECT_TRUE(warm.warm_started);
+  EXPECT_TRUE(warm.converged);
+  EXPECT_LE(warm.final_energy, cold.final_energy * (1.0 + 1e-4));
+  EXPECT_LE(warm.inner_iterations * 4, cold.inner_iterations);
+  // An incompatible state (other size) falls back to a cold start.
+  NormalMap gt_small;
+  FusionProblem small = noisyTwoPlanes(32, 24, 0.5, &gt_small);
+  const SolveReport fallback = solver.solve(small, state, true);
+  EXPECT_FALSE(fallback.warm_started);
+}
+
+TEST(Solver, FastBackendMatchesReferenceOnAWholeSolve) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(40, 30, 0.4, &gt);
+  NormalInput second;
+  second.normals = test::noisy(gt, 0.2, 99);
+  problem.inputs.push_back(second);
+  SolverSettings settings;
+  settings.max_total_inner_iterations = 200;
+  settings.relative_tolerance = 0.0;
+  settings.backend = SolverBackend::kReference;
+  SolveReport ref_report, fast_report;
+  Solver reference(settings);
+  reference.solve(problem, &ref_report);
+  settings.backend = SolverBackend::kFast;
+  Solver fast(settings);
+  fast.solve(problem, &fast_report);
+  EXPECT_EQ(ref_report.inner_iterations, fast_report.inner_iterations);
+  EXPECT_NEAR(fast_report.final_energy, ref_report.final_energy,
+              1e-4 * ref_report.final_energy);
+}
+
+TEST(Solver, OrientationConventionIsAppliedOnInput) {
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(32, 24, &gt);
+  NormalInput flipped;
+  flipped.normals = gt;
+  for (std::size_t i = 0; i < gt.pixelCount() * 3; ++i) flipped.normals.data()[i] *= -1;
+  flipped.orientation = Orientation::opticalFlipped();
+  NormalInput gl;
+  gl.normals = gt;
+  for (std::size_t i = 0; i < gt.pixelCount(); ++i) {
+    gl.normals.plane(1)[i] *= -1;
+    gl.normals.plane(2)[i] *= -1;
+  }
+  gl.orientation = Orientation::fromString("opengl");
+  for (const NormalInput& input : {flipped, gl}) {
+    FusionProblem p = problem;
+    p.inputs = {input};
+    Solver solver;
+    EXPECT_LT(test::meanSquaredError(solver.solve(p), gt), 1e-3);
+  }
+  EXPECT_THROW(Orientation::fromString("1 0 0 0 2 0 0 0 1"), ParameterError);
+  EXPECT_THROW(Orientation::fromString("upside_down"), ParameterError);
+}
+
+TEST(Solver, TimeBudgetReturnsTheBestIterateSoFar) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(320, 240, 0.5, &gt);
+  SolverSettings settings;
+  settings.time_budget_ms = 1.0;
+  settings.max_total_inner_iterations = 100000;
+  Solver solver(settings);
+  SolveReport report;
+  const NormalMap fused = solver.solve(problem, &report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 100000);
+  expectUnit(fused);
+  EXPECT_LE(report.final_energy, report.initial_energy);
+}
+
+TEST(Solver, StopsOnIterationCapAndTolerance) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(32, 24, 0.5, &gt);
+  SolverSettings settings;
+  settings.inner_iterations = 30;
+  settings.max_total_inner_iterations = 100;
+  settings.relative_tolerance = 0.0;
+  Solver capped(settings);
+  SolveReport report;
+  capped.solve(problem, &report);
+  EXPECT_EQ(report.inner_iterations, 100);
+  EXPECT_EQ(report.outer_iterations, 4);
+  EXPECT_FALSE(report.converged);
+  settings.relative_tolerance = 1e-2;
+  settings.max_total_inner_iterations = 100000;
+  Solver tolerant(settings);
+  tolerant.solve(problem, &report);
+  EXPECT_TRUE(report.converged);
+  EXPECT_LT(report.inner_iterations, 100000);
+}
+
+TEST(SolverErrors, BadInputRaisesTypedExceptions) {
+  NormalMap gt;
+  const FusionProblem good = noisyTwoPlanes(16, 12, 0.3, &gt);
+  Solver solver;
+  auto expect_input_error = [&](const FusionProblem& p, const char* what) {
+    try {
+      solver.solve(p);
+      ADD_FAILURE() << "expected InputError for " << what;
+    } catch (const InputError& e) {
+      EXPECT_GT(std::string(e.what()).size(), 10u) << what;
+    }
+  };
+  FusionProblem p = good;
+  p.inputs.clear();
+  expect_input_error(p, "no data terms");
+  p = good;
+  p.inputs[0].normals = NormalMap(15, 12, 3);
+  expect_input_error(p, "mismatched size");
+  p = good;
+  p.inputs[0].normals = NormalMap(16, 12, 2);
+  expect_input_error(p, "wrong channel count");
+  p = good;
+  p.image = ColorImage(16, 12, 2);
+  expect_input_error(p, "image channels");
+  p = good;
+  p.inputs[0].confidence = ScalarMap(16, 11, 1);
+  expect_input_error(p, "confidence size");
+  p = good;
+  p.K.K[0] = std::numeric_limits<double>::infinity();
+  expect_input_error(p, "non-finite K");
+  p = good;
+  p.K = CameraIntrinsics(0.0, 0.0, 8, 6);
+  expect_input_error(p, "singular K");
+  p = good;
+  p.image.at(0, 3, 3) = kNaN;
+  expect_input_error(p, "NaN image");
+  p = good;
+  p.inputs[0].normals.fill(kNaN);
+  expect_input_error(p, "all-missing input");
+  p = good;
+  p.inputs[0].weight = -1.0;
+  EXPECT_THROW(solver.solve(p), ParameterError);
+  p.inputs[0].weight = std::nan("");
+  EXPECT_THROW(solver.solve(p), ParameterError);
+}
+
+TEST(SolverErrors, BadSettingsRaiseParameterError) {
+  auto expect_bad = [](SolverSettings s, const char* name) {
+    try {
+      s.validate();
+      ADD_FAILURE() << "expected ParameterError for " << name;
+    } catch (const ParameterError& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(Solver{s}, ParameterError);
+  };
+  SolverSettings s;
+  s.lambda = -1;
+  expect_bad(s, "lambda");
+  s = SolverSettings();
+  s.huber_eps = std::nan("");
+  expect_bad(s, "huber_eps");
+  s = SolverSettings();
+  s.inner_iterations = 0;
+  expect_bad(s, "inner_iterations");
+  s = SolverSettings();
+  s.edges.w_min = 2.0;
+  expect_bad(s, "w_min");
+  s = SolverSettings();
+  s.time_budget_ms = -5;
+  expect_bad(s, "time_budget_ms");
+  s = SolverSettings();
+  s.tau = 0.5;
+  expect_bad(s, "tau");
+  // Steps that violate tau sigma (8 + L) < 1 are refused at solve time.
+  s = SolverSettings();
+  s.tau = 0.5;
+  s.sigma = 0.5;
+  NormalMap gt;
+  const FusionProblem problem = noisyTwoPlanes(16, 12, 0.3, &gt);
+  Solver solver(s);
+  EXPECT_THROW(solver.solve(problem), ParameterError);
+  // setSettings keeps the old settings on error.
+  Solver keeper;
+  SolverSettings bad;
+  bad.lambda = -2;
+  EXPECT_THROW(keeper.setSettings(bad), ParameterError);
+  EXPECT_EQ(keeper.settings().lambda, SolverSettings().lambda);
+  EXPECT_THROW(parseVisibilityMode("sometimes"), ParameterError);
+  EXPECT_EQ(parseDataPenalty("squared_l2"), DataPenalty::kSquaredL2);
+}
+
+TEST(EdgeWeights, FlatImageGivesOneAndEdgesGiveLess) {
+  ColorImage flat(20, 10, 1, 0.5f);
+  EdgeWeightSettings settings;
+  const PlanarImage w_flat = computeEdgeWeights(flat, settings);
+  for (std::size_t i = 0; i < w_flat.pixelCount() * 2; ++i) {
+    EXPECT_FLOAT_EQ(w_flat.data()[i], 1.0f);
+  }
+  ColorImage step(20, 10, 3, 0.0f);
+  for (int y = 0; y < 10; ++y) {
+    for (int x = 10; x < 20; ++x) {
+      for (int c = 0; c < 3; ++c) step.at(c, y, x) = 1.0f;  // black to white
+    }
+  }
+  const PlanarImage w = computeEdgeWeights(step, settings);
+  EXPECT_LT(w.at(0, 5, 9), 0.1f);     // across the step
+  EXPECT_GT(w.at(1, 5, 9), 0.99f);    // along it
+  EXPECT_GT(w.at(0, 5, 1), 0.99f);    // far from it
+  EXPECT_GE(w.at(0, 5, 9), settings.w_min);
+  // A step in green alone: the colour gradient sees full contrast, the
+  // luminance only 0.587 of it.
+  ColorImage green(20, 10, 3, 0.0f);
+  for (int y = 0; y < 10; ++y) {
+    for (int x = 10; x < 20; ++x) green.at(1, y, x) = 1.0f;
+  }
+  const PlanarImage w_lum = computeEdgeWeights(green, settings);
+  settings.color_mode = EdgeColorMode::kColorMax;
+  const PlanarImage w_max = computeEdgeWeights(green, settings);
+  EXPECT_NEAR(w_max.at(0, 5, 9), w.at(0, 5, 9), 1e-6);
+  EXPECT_LT(w_max.at(0, 5, 9), 0.5f * w_lum.at(0, 5, 9));
+  settings.enabled = false;
+  EXPECT_FLOAT_EQ(computeEdgeWeights(step, settings).at(0, 5, 9), 1.0f);
+}
+
+}  // namespace
+}  // namespace normal_fusion
