@@ -34,9 +34,10 @@ int resolveThreads(int requested) {
   return requested > 0 ? requested : std::max(1, omp_get_num_procs());
 }
 
-/// Validates the problem and builds the finest level: f_l in the optical
-/// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
-/// (0 where facing away in hard mode), and the edge weights.
+}  // namespace
+
+namespace internal {
+
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings) {
   validateProblem(problem);
@@ -104,6 +105,12 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
       std::count(any_valid.begin(), any_valid.end(), static_cast<unsigned char>(1)));
   return level;
 }
+
+}  // namespace internal
+
+namespace {
+
+using internal::prepareFinest;
 
 /// The next coarser level: 2x2 blocks, validity-weighted means of the data
 /// (normalized), weights averaged and doubled (the data term scales with area,

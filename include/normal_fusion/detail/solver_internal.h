@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "normal_fusion/settings.h"
+#include "normal_fusion/solver.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
@@ -127,6 +128,12 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& div, const PlanarImage& q_sum,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
 }  // namespace reference
+
+/// Validates the problem and builds the finest level: f_l in the optical
+/// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
+/// (0 where facing away in hard mode), and the edge weights.
+PreparedLevel prepareFinest(const FusionProblem& problem,
+                            const SolverSettings& settings);
 
 /// E(n) of ALGORITHM.md on a prepared level (double accumulation).
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
