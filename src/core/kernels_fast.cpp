@@ -40,164 +40,201 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
   return {img.plane(0) + offset, img.plane(1) + offset, img.plane(2) + offset};
 }
 
+// Row kernels are compiled for AVX2 and for baseline x86-64; the loader picks
+// one at run time (GCC function multiversioning), so the build stays portable.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define NF_MULTIVERSION __attribute__((target_clones("avx2", "default")))
+#else
+#define NF_MULTIVERSION
+#endif
+
+/// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
+/// direction, with g = next - here given as two row pointers.
+NF_MULTIVERSION
+void huberDualRow(int n, float sigma, float sigma_eps, const float* __restrict w,
+                  const float* __restrict here_x, const float* __restrict here_y,
+                  const float* __restrict here_z, const float* __restrict next_x,
+                  const float* __restrict next_y, const float* __restrict next_z,
+                  float* __restrict px, float* __restrict py,
+                  float* __restrict pz) {
+  for (int x = 0; x < n; ++x) {
+    const float shrink = w[x] / (w[x] + sigma_eps + kTiny);
+    const float ax = (px[x] + sigma * (next_x[x] - here_x[x])) * shrink;
+    const float ay = (py[x] + sigma * (next_y[x] - here_y[x])) * shrink;
+    const float az = (pz[x] + sigma * (next_z[x] - here_z[x])) * shrink;
+    const float sc = clampScale(ax * ax + ay * ay + az * az, w[x]);
+    px[x] = ax * sc;
+    py[x] = ay * sc;
+    pz[x] = az * sc;
+  }
+}
+
+/// q <- clamp_c(q + sigma (nbar - f)) (unsquared) for one row.
+NF_MULTIVERSION
+void dataDualRowL2(int n, float sigma, const float* __restrict c,
+                   const float* __restrict nx, const float* __restrict ny,
+                   const float* __restrict nz, const float* __restrict fx,
+                   const float* __restrict fy, const float* __restrict fz,
+                   float* __restrict qx, float* __restrict qy,
+                   float* __restrict qz) {
+  for (int x = 0; x < n; ++x) {
+    const float ax = qx[x] + sigma * (nx[x] - fx[x]);
+    const float ay = qy[x] + sigma * (ny[x] - fy[x]);
+    const float az = qz[x] + sigma * (nz[x] - fz[x]);
+    const float sc = clampScale(ax * ax + ay * ay + az * az, c[x]);
+    qx[x] = ax * sc;
+    qy[x] = ay * sc;
+    qz[x] = az * sc;
+  }
+}
+
+/// q <- (q + sigma (nbar - f)) / (1 + sigma / c) (squared) for one row.
+NF_MULTIVERSION
+void dataDualRowSquared(int n, float sigma, const float* __restrict c,
+                        const float* __restrict nx, const float* __restrict ny,
+                        const float* __restrict nz, const float* __restrict fx,
+                        const float* __restrict fy, const float* __restrict fz,
+                        float* __restrict qx, float* __restrict qy,
+                        float* __restrict qz) {
+  for (int x = 0; x < n; ++x) {
+    const float sc = c[x] / (c[x] + sigma);
+    qx[x] = (qx[x] + sigma * (nx[x] - fx[x])) * sc;
+    qy[x] = (qy[x] + sigma * (ny[x] - fy[x])) * sc;
+    qz[x] = (qz[x] + sigma * (nz[x] - fz[x])) * sc;
+  }
+}
+
 /// Dual pass over one row: p_h, p_v and every q_l.
 void dualRow(const PreparedLevel& level, const InnerParams& prm,
              IterationState& s, int y) {
   const int W = level.width;
   const std::size_t off = static_cast<std::size_t>(y) * W;
-  const bool has_below = y + 1 < level.height;
   const ConstPlanes3 nb = rowOf(static_cast<const PlanarImage&>(s.nbar), off);
-  const ConstPlanes3 nb_below = rowOf(static_cast<const PlanarImage&>(s.nbar),
-                                      has_below ? off + W : off);
   const Planes3 ph = rowOf(s.p_h, off);
   const Planes3 pv = rowOf(s.p_v, off);
-  const float* w_h = level.edge_weight.plane(0) + off;
-  const float* w_v = level.edge_weight.plane(1) + off;
   const float sigma = prm.sigma;
   const float sigma_eps = prm.sigma * prm.huber_eps;
-  // grad_v is 0 on the last row; multiply by 0 rather than branch per pixel.
-  const float below = has_below ? 1.0f : 0.0f;
-
-  // p_h <- clamp_{w_h}((p_h + sigma grad_h nbar) / (1 + sigma eps / w_h)),
-  // likewise p_v; grad_h is 0 on the last column.
-  for (int x = 0; x < W; ++x) {
-    const int xr = std::min(x + 1, W - 1);
-    const float gx = nb.x[xr] - nb.x[x];
-    const float gy = nb.y[xr] - nb.y[x];
-    const float gz = nb.z[xr] - nb.z[x];
-    const float wh = w_h[x];
-    const float shrink_h = wh / (wh + sigma_eps + kTiny);
-    const float hx = (ph.x[x] + sigma * gx) * shrink_h;
-    const float hy = (ph.y[x] + sigma * gy) * shrink_h;
-    const float hz = (ph.z[x] + sigma * gz) * shrink_h;
-    const float sh = clampScale(hx * hx + hy * hy + hz * hz, wh);
-    ph.x[x] = hx * sh;
-    ph.y[x] = hy * sh;
-    ph.z[x] = hz * sh;
-
-    const float vx = below * (nb_below.x[x] - nb.x[x]);
-    const float vy = below * (nb_below.y[x] - nb.y[x]);
-    const float vz = below * (nb_below.z[x] - nb.z[x]);
-    const float wv = w_v[x];
-    const float shrink_v = wv / (wv + sigma_eps + kTiny);
-    const float ux = (pv.x[x] + sigma * vx) * shrink_v;
-    const float uy = (pv.y[x] + sigma * vy) * shrink_v;
-    const float uz = (pv.z[x] + sigma * vz) * shrink_v;
-    const float sv = clampScale(ux * ux + uy * uy + uz * uz, wv);
-    pv.x[x] = ux * sv;
-    pv.y[x] = uy * sv;
-    pv.z[x] = uz * sv;
-  }
-
+  // p_h: grad_h nbar = nbar(x+1) - nbar(x), 0 on the last column (so the
+  // last column sees next = here).
+  huberDualRow(W - 1, sigma, sigma_eps, level.edge_weight.plane(0) + off, nb.x,
+               nb.y, nb.z, nb.x + 1, nb.y + 1, nb.z + 1, ph.x, ph.y, ph.z);
+  huberDualRow(1, sigma, sigma_eps, level.edge_weight.plane(0) + off + W - 1,
+               nb.x + W - 1, nb.y + W - 1, nb.z + W - 1, nb.x + W - 1,
+               nb.y + W - 1, nb.z + W - 1, ph.x + W - 1, ph.y + W - 1,
+               ph.z + W - 1);
+  // p_v: grad_v nbar = nbar(y+1) - nbar(y), 0 on the last row.
+  const ConstPlanes3 nb_next = rowOf(static_cast<const PlanarImage&>(s.nbar),
+                                     y + 1 < level.height ? off + W : off);
+  huberDualRow(W, sigma, sigma_eps, level.edge_weight.plane(1) + off, nb.x, nb.y,
+               nb.z, nb_next.x, nb_next.y, nb_next.z, pv.x, pv.y, pv.z);
+  // q_l, one data term at a time.
   for (int l = 0; l < level.num_inputs; ++l) {
     const ConstPlanes3 f = rowOf(level.data[l], off);
     const float* c_w = level.data_weight[l].plane(0) + off;
     const Planes3 q = rowOf(s.q[l], off);
     if (prm.penalty == DataPenalty::kL2) {
-      // q_l <- clamp_{c_l}(q_l + sigma (nbar - f_l)).
-      for (int x = 0; x < W; ++x) {
-        const float ax = q.x[x] + sigma * (nb.x[x] - f.x[x]);
-        const float ay = q.y[x] + sigma * (nb.y[x] - f.y[x]);
-        const float az = q.z[x] + sigma * (nb.z[x] - f.z[x]);
-        const float sc = clampScale(ax * ax + ay * ay + az * az, c_w[x]);
-        q.x[x] = ax * sc;
-        q.y[x] = ay * sc;
-        q.z[x] = az * sc;
-      }
+      dataDualRowL2(W, sigma, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x, q.y, q.z);
     } else {
-      // q_l <- (q_l + sigma (nbar - f_l)) / (1 + sigma / c_l).
-      for (int x = 0; x < W; ++x) {
-        const float sc = c_w[x] / (c_w[x] + sigma);
-        q.x[x] = (q.x[x] + sigma * (nb.x[x] - f.x[x])) * sc;
-        q.y[x] = (q.y[x] + sigma * (nb.y[x] - f.y[x])) * sc;
-        q.z[x] = (q.z[x] + sigma * (nb.z[x] - f.z[x])) * sc;
-      }
+      dataDualRowSquared(W, sigma, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x,
+                         q.y, q.z);
     }
   }
 }
 
+/// d = div p for one row and one channel: (p_h(x) - p_h(x-1)) +
+/// (p_v(y) - p_v(y-1)), Dirichlet ends (p_h(-1) = 0, p_h(W-1) read as 0,
+/// p_v(-1) = 0, p_v(H-1) read as 0: `here_v_on` / `up` are 0 or 1).
+NF_MULTIVERSION
+void divergenceRow(int W, const float* __restrict ph, const float* __restrict pv,
+                   const float* __restrict pv_up, float here_v_on, float up_on,
+                   float* __restrict d) {
+  d[0] = ph[0] + here_v_on * pv[0] - up_on * pv_up[0];
+  for (int x = 1; x < W - 1; ++x) {
+    d[x] = (ph[x] - ph[x - 1]) + here_v_on * pv[x] - up_on * pv_up[x];
+  }
+  if (W > 1) d[W - 1] = -ph[W - 2] + here_v_on * pv[W - 1] - up_on * pv_up[W - 1];
+}
+
+/// d -= q for one row and one channel.
+NF_MULTIVERSION
+void subtractRow(int W, const float* __restrict q, float* __restrict d) {
+  for (int x = 0; x < W; ++x) d[x] -= q[x];
+}
+
+/// n <- Proj_C(n + tau d), nbar <- 2 n - n_old for one row; C the tangent
+/// plane at n0, intersected with n . r <= 0 when kSoft.
+template <bool kSoft>
+NF_MULTIVERSION void primalUpdateRow(
+    int W, float tau, const float* __restrict dx, const float* __restrict dy,
+    const float* __restrict dz, const float* __restrict ax_,
+    const float* __restrict ay_, const float* __restrict az_, float r0x,
+    float r0y, float r0z, float drx, float dry, float drz, float* __restrict nx,
+    float* __restrict ny, float* __restrict nz, float* __restrict bx,
+    float* __restrict by, float* __restrict bz) {
+  for (int x = 0; x < W; ++x) {
+    const float ox = nx[x], oy = ny[x], oz = nz[x];
+    float vx = ox + tau * dx[x];
+    float vy = oy + tau * dy[x];
+    float vz = oz + tau * dz[x];
+    // Onto the tangent plane n0 . n = 1.
+    const float ax = ax_[x], ay = ay_[x], az = az_[x];
+    const float plane_off = ax * vx + ay * vy + az * vz - 1.0f;
+    vx -= plane_off * ax;
+    vy -= plane_off * ay;
+    vz -= plane_off * az;
+    if (kSoft) {
+      // Within the plane onto n . r <= 0 (the line n . r = 0 when violated).
+      const float xf = static_cast<float>(x);
+      const float rx = r0x + drx * xf, ry = r0y + dry * xf, rz = r0z + drz * xf;
+      const float rv = rx * vx + ry * vy + rz * vz;
+      const float rn0 = rx * ax + ry * ay + rz * az;
+      const float tx = rx - rn0 * ax, ty = ry - rn0 * ay, tz = rz - rn0 * az;
+      const float t2 = tx * tx + ty * ty + tz * tz;
+      const float k = std::max(rv, 0.0f) / std::max(t2, 1e-20f);
+      const float k_safe = t2 > 1e-20f ? k : 0.0f;
+      vx -= k_safe * tx;
+      vy -= k_safe * ty;
+      vz -= k_safe * tz;
+    }
+    nx[x] = vx;
+    ny[x] = vy;
+    nz[x] = vz;
+    bx[x] = 2.0f * vx - ox;
+    by[x] = 2.0f * vy - oy;
+    bz[x] = 2.0f * vz - oz;
+  }
+}
+
 /// Primal pass over one row: n <- Proj_C(n + tau (div p - sum q)),
-/// nbar <- 2 n - n_old.
+/// nbar <- 2 n - n_old. `scratch` holds 3 rows of W floats.
 void primalRow(const PreparedLevel& level, const InnerParams& prm,
-               IterationState& s, int y) {
+               IterationState& s, int y, float* scratch) {
   const int W = level.width;
   const std::size_t off = static_cast<std::size_t>(y) * W;
-  const bool has_above = y > 0;
-  const bool has_below = y + 1 < level.height;
-  const ConstPlanes3 ph = rowOf(static_cast<const PlanarImage&>(s.p_h), off);
-  const ConstPlanes3 pv = rowOf(static_cast<const PlanarImage&>(s.p_v), off);
-  const ConstPlanes3 pv_up = rowOf(static_cast<const PlanarImage&>(s.p_v),
-                                   has_above ? off - W : off);
-  const ConstPlanes3 n0 = rowOf(static_cast<const PlanarImage&>(s.n0), off);
-  const Planes3 n = rowOf(s.n, off);
-  const Planes3 nb = rowOf(s.nbar, off);
-  const float up = has_above ? 1.0f : 0.0f;
-  const float here_v = has_below ? 1.0f : 0.0f;
-  const float tau = prm.tau;
-  const int L = level.num_inputs;
-  const float* q_planes[8][3];
-  const int L_cached = std::min(L, 8);
-  for (int l = 0; l < L_cached; ++l) {
-    for (int c = 0; c < 3; ++c) q_planes[l][c] = s.q[l].plane(c) + off;
+  const float up_on = y > 0 ? 1.0f : 0.0f;
+  const float here_v_on = y + 1 < level.height ? 1.0f : 0.0f;
+  const std::size_t off_up = y > 0 ? off - W : off;
+  float* d[3] = {scratch, scratch + W, scratch + 2 * W};
+  for (int c = 0; c < 3; ++c) {
+    // d = div p - sum_l q_l.
+    divergenceRow(W, s.p_h.plane(c) + off, s.p_v.plane(c) + off,
+                  s.p_v.plane(c) + off_up, here_v_on, up_on, d[c]);
+    for (int l = 0; l < level.num_inputs; ++l) {
+      subtractRow(W, s.q[l].plane(c) + off, d[c]);
+    }
   }
   // Ray r = K^-1 (x, y, 1): affine in x along the row.
   const auto& Ki = level.K_inv;
   const float r0x = static_cast<float>(Ki[1] * y + Ki[2]);
   const float r0y = static_cast<float>(Ki[4] * y + Ki[5]);
   const float r0z = static_cast<float>(Ki[7] * y + Ki[8]);
-  const float drx = static_cast<float>(Ki[0]);
-  const float dry = static_cast<float>(Ki[3]);
-  const float drz = static_cast<float>(Ki[6]);
-  const bool soft = prm.soft_visibility;
-
-  for (int x = 0; x < W; ++x) {
-    // div p = (p_h(x) - p_h(x-1)) + (p_v(y) - p_v(y-1)), Dirichlet ends.
-    const float hr = x + 1 < W ? 1.0f : 0.0f;
-    const int xl = std::max(x - 1, 0);
-    const float hl = x > 0 ? 1.0f : 0.0f;
-    float dx = hr * ph.x[x] - hl * ph.x[xl] + here_v * pv.x[x] - up * pv_up.x[x];
-    float dy = hr * ph.y[x] - hl * ph.y[xl] + here_v * pv.y[x] - up * pv_up.y[x];
-    float dz = hr * ph.z[x] - hl * ph.z[xl] + here_v * pv.z[x] - up * pv_up.z[x];
-    // - sum_l q_l.
-    for (int l = 0; l < L_cached; ++l) {
-      dx -= q_planes[l][0][x];
-      dy -= q_planes[l][1][x];
-      dz -= q_planes[l][2][x];
-    }
-    for (int l = 8; l < L; ++l) {
-      dx -= s.q[l].plane(0)[off + x];
-      dy -= s.q[l].plane(1)[off + x];
-      dz -= s.q[l].plane(2)[off + x];
-    }
-    const float ox = n.x[x], oy = n.y[x], oz = n.z[x];
-    float vx = ox + tau * dx;
-    float vy = oy + tau * dy;
-    float vz = oz + tau * dz;
-    // Onto the tangent plane n0 . n = 1.
-    const float ax = n0.x[x], ay = n0.y[x], az = n0.z[x];
-    const float plane_off = ax * vx + ay * vy + az * vz - 1.0f;
-    vx -= plane_off * ax;
-    vy -= plane_off * ay;
-    vz -= plane_off * az;
-    if (soft) {
-      // Within the plane onto n . r <= 0 (the line n . r = 0 when violated).
-      const float rx = r0x + drx * x, ry = r0y + dry * x, rz = r0z + drz * x;
-      const float rv = rx * vx + ry * vy + rz * vz;
-      const float rn0 = rx * ax + ry * ay + rz * az;
-      const float tx = rx - rn0 * ax, ty = ry - rn0 * ay, tz = rz - rn0 * az;
-      const float t2 = tx * tx + ty * ty + tz * tz;
-      const float k = t2 > 1e-20f ? std::max(rv, 0.0f) / t2 : 0.0f;
-      vx -= k * tx;
-      vy -= k * ty;
-      vz -= k * tz;
-    }
-    n.x[x] = vx;
-    n.y[x] = vy;
-    n.z[x] = vz;
-    nb.x[x] = 2.0f * vx - ox;
-    nb.y[x] = 2.0f * vy - oy;
-    nb.z[x] = 2.0f * vz - oz;
-  }
+  const ConstPlanes3 n0 = rowOf(static_cast<const PlanarImage&>(s.n0), off);
+  const Planes3 n = rowOf(s.n, off);
+  const Planes3 nb = rowOf(s.nbar, off);
+  auto update = prm.soft_visibility ? primalUpdateRow<true> : primalUpdateRow<false>;
+  update(W, prm.tau, d[0], d[1], d[2], n0.x, n0.y, n0.z, r0x, r0y, r0z,
+         static_cast<float>(Ki[0]), static_cast<float>(Ki[3]),
+         static_cast<float>(Ki[6]), n.x, n.y, n.z, nb.x, nb.y, nb.z);
 }
 
 }  // namespace
@@ -206,13 +243,17 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations) {
   const int H = level.height;
   const int threads = std::max(1, std::min(params.num_threads, H));
+  // One scratch row triple per thread, allocated with the state.
+  state.row_scratch.resize(static_cast<std::size_t>(threads) * 3 * level.width);
 #pragma omp parallel num_threads(threads)
   {
+    float* scratch = state.row_scratch.data() +
+                     static_cast<std::size_t>(omp_get_thread_num()) * 3 * level.width;
     for (int it = 0; it < iterations; ++it) {
 #pragma omp for schedule(static)
       for (int y = 0; y < H; ++y) dualRow(level, params, state, y);
 #pragma omp for schedule(static)
-      for (int y = 0; y < H; ++y) primalRow(level, params, state, y);
+      for (int y = 0; y < H; ++y) primalRow(level, params, state, y, scratch);
     }
   }
 }

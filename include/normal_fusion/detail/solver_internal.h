@@ -55,6 +55,8 @@ struct IterationState {
   std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
   // Scratch of the reference backend: gradients, divergence, data-dual sum.
   PlanarImage grad_h, grad_v, div, q_sum;
+  // Scratch of the fast backend: three rows per thread.
+  std::vector<float> row_scratch;
 
   void resize(int width, int height, int num_inputs);
 };
