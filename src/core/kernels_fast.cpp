@@ -5,7 +5,10 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <thread>
+#include <vector>
 
 #include "normal_fusion/detail/solver_internal.h"
 
@@ -190,11 +193,11 @@ NF_MULTIVERSION void primalUpdateRow(
       const float rn0 = rx * ax + ry * ay + rz * az;
       const float tx = rx - rn0 * ax, ty = ry - rn0 * ay, tz = rz - rn0 * az;
       const float t2 = tx * tx + ty * ty + tz * tz;
+      // t2 ~ 0 only where n0 = -r/|r|; there r . v = -|r| < 0 and k = 0.
       const float k = std::max(rv, 0.0f) / std::max(t2, 1e-20f);
-      const float k_safe = t2 > 1e-20f ? k : 0.0f;
-      vx -= k_safe * tx;
-      vy -= k_safe * ty;
-      vz -= k_safe * tz;
+      vx -= k * tx;
+      vy -= k * ty;
+      vz -= k * tz;
     }
     nx[x] = vx;
     ny[x] = vy;
@@ -241,19 +244,80 @@ void primalRow(const PreparedLevel& level, const InnerParams& prm,
 
 void runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations) {
+  // Temporal blocking with a pipeline of threads. One iteration is a sweep
+  // over the rows doing dual(y) then primal(y) in place: dual(y) reads nbar
+  // rows y and y+1 (not yet touched by primal in this sweep) and primal(y)
+  // reads p_v(y-1) (already updated). Iteration k+1 may therefore process row
+  // y as soon as iteration k has finished row y+1. Each thread runs a
+  // wavefront of `depth` consecutive iterations over a band of depth + 1 rows
+  // that stays in its cache, and thread t+1 runs the next `depth` iterations
+  // one row behind thread t. Memory traffic per iteration drops by about the
+  // depth, and the result is the same as sweep after sweep.
+  if (iterations <= 0) return;
+  const int W = level.width;
   const int H = level.height;
-  const int threads = std::max(1, std::min(params.num_threads, H));
-  // One scratch row triple per thread, allocated with the state.
-  state.row_scratch.resize(static_cast<std::size_t>(threads) * 3 * level.width);
+  const int threads = std::max(1, std::min(params.num_threads, iterations));
+  const int depth = std::max(1, params.block_depth);
+  state.row_scratch.resize(static_cast<std::size_t>(threads) * 3 * W);
+  // progress[t] counts rows finished by thread t's last iteration, summed over
+  // rounds (round r adds H), so a waiting thread knows which round it sees.
+  std::vector<std::atomic<long>>& progress = state.progress;
+  if (static_cast<int>(progress.size()) < threads) {
+    std::vector<std::atomic<long>> fresh(threads);
+    progress.swap(fresh);
+  }
+  for (int t = 0; t < threads; ++t) progress[t].store(0, std::memory_order_relaxed);
+  const int per_round = threads * depth;
+  const int rounds = (iterations + per_round - 1) / per_round;
+
 #pragma omp parallel num_threads(threads)
   {
-    float* scratch = state.row_scratch.data() +
-                     static_cast<std::size_t>(omp_get_thread_num()) * 3 * level.width;
-    for (int it = 0; it < iterations; ++it) {
-#pragma omp for schedule(static)
-      for (int y = 0; y < H; ++y) dualRow(level, params, state, y);
-#pragma omp for schedule(static)
-      for (int y = 0; y < H; ++y) primalRow(level, params, state, y, scratch);
+    const int t = omp_get_thread_num();
+    float* scratch = state.row_scratch.data() + static_cast<std::size_t>(t) * 3 * W;
+    int remaining = iterations;
+    for (int round = 0; round < rounds; ++round) {
+      // Iterations of this round, split as evenly as possible over threads.
+      const int in_round = std::min(per_round, remaining);
+      remaining -= in_round;
+      const int mine = in_round / threads + (t < in_round % threads ? 1 : 0);
+      // Whose rows this thread's first iteration depends on: the previous
+      // thread in this round, or the last thread of the previous round.
+      const int pred = t > 0 ? t - 1 : threads - 1;
+      const long pred_base =
+          t > 0 ? static_cast<long>(round) * H : static_cast<long>(round - 1) * H;
+      const bool must_wait = !(t == 0 && round == 0);
+      if (mine == 0) {
+        // Nothing to do: pass the predecessor's progress on.
+        if (must_wait) {
+          while (progress[pred].load(std::memory_order_acquire) < pred_base + H) {
+            std::this_thread::yield();
+          }
+        }
+        progress[t].store(static_cast<long>(round + 1) * H, std::memory_order_release);
+        continue;
+      }
+      for (int step = 0; step < H + mine - 1; ++step) {
+        // The first iteration processes row `step`: wait until the
+        // predecessor's last iteration has finished row step + 1.
+        if (must_wait && step < H) {
+          const long needed = pred_base + std::min(step + 2, H);
+          int spins = 0;
+          while (progress[pred].load(std::memory_order_acquire) < needed) {
+            if (++spins > 64) std::this_thread::yield();
+          }
+        }
+        for (int i = 0; i < mine; ++i) {
+          const int y = step - i;
+          if (y < 0 || y >= H) continue;
+          dualRow(level, params, state, y);
+          primalRow(level, params, state, y, scratch);
+        }
+        const int finished = step - (mine - 1);
+        if (finished >= 0) {
+          progress[t].store(static_cast<long>(round) * H + finished + 1,
+                            std::memory_order_release);
+        }
+      }
     }
   }
 }

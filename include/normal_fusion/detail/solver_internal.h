@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <vector>
 
@@ -43,6 +44,7 @@ struct InnerParams {
   DataPenalty penalty = DataPenalty::kL2;
   bool soft_visibility = false;
   int num_threads = 1;
+  int block_depth = 6;  ///< iterations per thread per sweep (fast backend)
 };
 
 /// Variables of the primal-dual iteration (allocated once per size).
@@ -55,8 +57,10 @@ struct IterationState {
   std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
   // Scratch of the reference backend: gradients, divergence, data-dual sum.
   PlanarImage grad_h, grad_v, div, q_sum;
-  // Scratch of the fast backend: three rows per thread.
+  // Scratch of the fast backend: three rows per thread, and each thread's
+  // progress through the rows (the temporal-blocking pipeline).
   std::vector<float> row_scratch;
+  std::vector<std::atomic<long>> progress;
 
   void resize(int width, int height, int num_inputs);
 };
