@@ -242,6 +242,40 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
   EXPECT_NEAR(e_fast, e_ref, 1e-4 * std::abs(e_ref));
 }
 
+/// The temporal-blocking pipeline gives the same iterates for any thread
+/// count, block depth and iteration count (rounds that do not divide evenly,
+/// threads with nothing to do in a round).
+TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
+  const auto level = randomLevel(29, 17, 2, 7);
+  internal::InnerParams params;
+  params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(10.0));
+  params.huber_eps = 0.05f;
+  params.soft_visibility = true;
+  for (int iterations : {1, 5, 13, 40}) {
+    internal::IterationState ref;
+    initState(level, ref);
+    internal::runInnerReference(level, params, ref, iterations);
+    for (int threads : {1, 2, 3}) {
+      for (int depth : {1, 4, 32}) {
+        params.num_threads = threads;
+        params.block_depth = depth;
+        internal::IterationState fast;
+        initState(level, fast);
+        internal::runInnerFast(level, params, fast, iterations);
+        double max_diff = 0.0;
+        for (std::size_t i = 0; i < fast.n.pixelCount() * 3; ++i) {
+          max_diff = std::max(max_diff, static_cast<double>(std::abs(
+                                            fast.n.data()[i] - ref.n.data()[i])));
+          max_diff = std::max(max_diff, static_cast<double>(std::abs(
+                                            fast.p_v.data()[i] - ref.p_v.data()[i])));
+        }
+        EXPECT_LT(max_diff, 1e-5) << "iterations " << iterations << " threads "
+                                  << threads << " depth " << depth;
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Backends, FastMatchesReference,
     ::testing::Combine(::testing::Values(1, 2, 3),
