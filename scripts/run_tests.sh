@@ -14,6 +14,9 @@ make -j"$jobs" tests >"$ws/build_tests.log" 2>&1 || {
   echo "normal_fusion: building the tests failed (log: $ws/build_tests.log)" >&2
   exit 1
 }
+# setup.bash reads unset variables: relax -u while sourcing it.
+set +u
 # shellcheck disable=SC1091
 source "$ws/devel/setup.bash"
+set -u
 ctest --output-on-failure "$@"
