@@ -80,6 +80,12 @@ class Solver {
   SolveReport solve(const FusionProblem& problem, SolverState& state,
                     bool warm_start = false);
 
+  /// The same, filling a caller-owned report: with the report, the state and
+  /// the problem's buffers reused, a steady stream of frames of one size
+  /// allocates no heap memory inside the solver.
+  void solve(const FusionProblem& problem, SolverState& state, bool warm_start,
+             SolveReport& report);
+
   /// Convenience: cold start, returns the fused normals.
   NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);
 

@@ -38,36 +38,36 @@ int resolveThreads(int requested) {
 
 namespace internal {
 
-PreparedLevel prepareFinest(const FusionProblem& problem,
-                            const SolverSettings& settings) {
+void prepareFinestInto(const FusionProblem& problem,
+                       const SolverSettings& settings, PreparedLevel& level,
+                       EdgeWeightScratch& scratch, int threads) {
   validateProblem(problem);
-  PreparedLevel level;
   const int W = problem.image.width(), H = problem.image.height();
-  const std::size_t N = problem.image.pixelCount();
   level.width = W;
   level.height = H;
   level.num_inputs = static_cast<int>(problem.inputs.size());
   level.K = problem.K;
   level.K_inv = problem.K.inverse();
   level.image = problem.image;
-  level.edge_weight = computeEdgeWeights(problem.image, settings.edges);
+  computeEdgeWeightsInto(problem.image, settings.edges, level.edge_weight,
+                         scratch, threads);
   level.data.resize(level.num_inputs);
   level.data_weight.resize(level.num_inputs);
-
-  std::vector<unsigned char> any_valid(N, 0);
   for (int l = 0; l < level.num_inputs; ++l) {
-    const NormalInput& input = problem.inputs[l];
-    PlanarImage& f = level.data[l];
-    PlanarImage& c = level.data_weight[l];
-    f.resize(W, H, 3);
-    c.resize(W, H, 1);
-    const auto& M = input.orientation.M;
-    const float global = static_cast<float>(settings.lambda * input.weight);
-    for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        const std::size_t i = static_cast<std::size_t>(y) * W + x;
-        const float in[3] = {input.normals.plane(0)[i],
-                             input.normals.plane(1)[i],
+    level.data[l].resize(W, H, 3);
+    level.data_weight[l].resize(W, H, 1);
+  }
+  const bool hard = settings.visibility == VisibilityMode::kHard;
+  long valid = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : valid)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      bool any_valid = false;
+      for (int l = 0; l < level.num_inputs; ++l) {
+        const NormalInput& input = problem.inputs[l];
+        const auto& M = input.orientation.M;
+        const float in[3] = {input.normals.plane(0)[i], input.normals.plane(1)[i],
                              input.normals.plane(2)[i]};
         float conf = input.confidence.empty() ? 1.0f : input.confidence.plane(0)[i];
         conf = std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
@@ -82,8 +82,8 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
           const float len =
               std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2]);
           for (float& v : out) v /= len;
-          weight = global * conf;
-          if (settings.visibility == VisibilityMode::kHard) {
+          weight = static_cast<float>(settings.lambda * input.weight) * conf;
+          if (hard) {
             float r[3];
             level.ray(x, y, r);
             if (r[0] * out[0] + r[1] * out[1] + r[2] * out[2] > 0.0f) {
@@ -95,14 +95,22 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
           out[0] = out[1] = out[2] = 0.0f;
           weight = 0.0f;
         }
-        for (int ch = 0; ch < 3; ++ch) f.plane(ch)[i] = out[ch];
-        c.plane(0)[i] = weight;
-        if (weight > 0.0f) any_valid[i] = 1;
+        for (int ch = 0; ch < 3; ++ch) level.data[l].plane(ch)[i] = out[ch];
+        level.data_weight[l].plane(0)[i] = weight;
+        any_valid = any_valid || weight > 0.0f;
       }
+      valid += any_valid ? 1 : 0;
     }
   }
-  level.valid_pixels = static_cast<int>(
-      std::count(any_valid.begin(), any_valid.end(), static_cast<unsigned char>(1)));
+  level.valid_pixels = static_cast<int>(valid);
+}
+
+PreparedLevel prepareFinest(const FusionProblem& problem,
+                            const SolverSettings& settings) {
+  PreparedLevel level;
+  EdgeWeightScratch scratch;
+  prepareFinestInto(problem, settings, level, scratch,
+                    resolveThreads(settings.num_threads));
   return level;
 }
 
@@ -110,74 +118,75 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
 
 namespace {
 
-using internal::prepareFinest;
-
-/// The next coarser level: 2x2 blocks, validity-weighted means of the data
+/// The next coarser level (into reused buffers): 2x2 blocks, validity-weighted means of the data
 /// (normalized), weights averaged and doubled (the data term scales with area,
 /// the smoothness term with length), K scaled, edge weights recomputed.
-PreparedLevel downsample(const PreparedLevel& fine,
-                         const SolverSettings& settings) {
-  PreparedLevel coarse;
+void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
+                    PreparedLevel& coarse, internal::EdgeWeightScratch& scratch,
+                    int threads) {
   const int W = (fine.width + 1) / 2, H = (fine.height + 1) / 2;
+  const int L = fine.num_inputs;
   coarse.width = W;
   coarse.height = H;
-  coarse.num_inputs = fine.num_inputs;
+  coarse.num_inputs = L;
   coarse.K = fine.K.scaled(static_cast<double>(W) / fine.width,
                            static_cast<double>(H) / fine.height);
   coarse.K_inv = coarse.K.inverse();
   coarse.image.resize(W, H, fine.image.channels());
-  coarse.data.resize(fine.num_inputs);
-  coarse.data_weight.resize(fine.num_inputs);
-  for (int l = 0; l < fine.num_inputs; ++l) {
+  coarse.data.resize(L);
+  coarse.data_weight.resize(L);
+  for (int l = 0; l < L; ++l) {
     coarse.data[l].resize(W, H, 3);
     coarse.data_weight[l].resize(W, H, 1);
   }
-  std::vector<unsigned char> any_valid(static_cast<std::size_t>(W) * H, 0);
+  long valid = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : valid)
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const std::size_t j = static_cast<std::size_t>(y) * W + x;
-      int count = 0;
-      double img_sum[3] = {0, 0, 0};
-      std::vector<double> f_sum(3 * fine.num_inputs, 0.0), c_sum(fine.num_inputs, 0.0);
-      for (int dy = 0; dy < 2; ++dy) {
-        for (int dx = 0; dx < 2; ++dx) {
-          const int fx = 2 * x + dx, fy = 2 * y + dy;
-          if (fx >= fine.width || fy >= fine.height) continue;
-          ++count;
-          for (int c = 0; c < fine.image.channels(); ++c) {
-            img_sum[c] += fine.image.at(c, fy, fx);
-          }
-          for (int l = 0; l < fine.num_inputs; ++l) {
-            const float cw = fine.data_weight[l].at(0, fy, fx);
-            c_sum[l] += cw;
-            for (int c = 0; c < 3; ++c) {
-              f_sum[3 * l + c] += cw * fine.data[l].at(c, fy, fx);
-            }
-          }
-        }
-      }
+      const int x0 = 2 * x, x1 = std::min(2 * x + 1, fine.width - 1);
+      const int y0 = 2 * y, y1 = std::min(2 * y + 1, fine.height - 1);
+      const int xs[4] = {x0, x1, x0, x1};
+      const int ys[4] = {y0, y0, y1, y1};
+      const int count = (x1 > x0 ? 2 : 1) * (y1 > y0 ? 2 : 1);
+      // Blocks at an odd border repeat a pixel: visit each pixel once.
+      auto duplicate = [&](int k) {
+        return (k == 1 && x1 == x0) || (k == 2 && y1 == y0) ||
+               (k == 3 && (x1 == x0 || y1 == y0));
+      };
       for (int c = 0; c < fine.image.channels(); ++c) {
-        coarse.image.plane(c)[j] = static_cast<float>(img_sum[c] / count);
+        float sum = 0.0f;
+        for (int k = 0; k < 4; ++k) {
+          if (!duplicate(k)) sum += fine.image.at(c, ys[k], xs[k]);
+        }
+        coarse.image.plane(c)[j] = sum / count;
       }
-      for (int l = 0; l < fine.num_inputs; ++l) {
-        const double len = std::sqrt(f_sum[3 * l] * f_sum[3 * l] +
-                                     f_sum[3 * l + 1] * f_sum[3 * l + 1] +
-                                     f_sum[3 * l + 2] * f_sum[3 * l + 2]);
-        const bool ok = c_sum[l] > 0.0 && len > 1e-9;
+      bool any_valid = false;
+      for (int l = 0; l < L; ++l) {
+        double f_sum[3] = {0.0, 0.0, 0.0};
+        double c_sum = 0.0;
+        for (int k = 0; k < 4; ++k) {
+          if (duplicate(k)) continue;
+          const float cw = fine.data_weight[l].at(0, ys[k], xs[k]);
+          c_sum += cw;
+          for (int c = 0; c < 3; ++c) f_sum[c] += cw * fine.data[l].at(c, ys[k], xs[k]);
+        }
+        const double len = std::sqrt(f_sum[0] * f_sum[0] + f_sum[1] * f_sum[1] +
+                                     f_sum[2] * f_sum[2]);
+        const bool ok = c_sum > 0.0 && len > 1e-9;
         for (int c = 0; c < 3; ++c) {
-          coarse.data[l].plane(c)[j] =
-              ok ? static_cast<float>(f_sum[3 * l + c] / len) : 0.0f;
+          coarse.data[l].plane(c)[j] = ok ? static_cast<float>(f_sum[c] / len) : 0.0f;
         }
         coarse.data_weight[l].plane(0)[j] =
-            ok ? static_cast<float>(2.0 * c_sum[l] / count) : 0.0f;
-        if (ok) any_valid[j] = 1;
+            ok ? static_cast<float>(2.0 * c_sum / count) : 0.0f;
+        any_valid = any_valid || ok;
       }
+      valid += any_valid ? 1 : 0;
     }
   }
-  coarse.valid_pixels = static_cast<int>(
-      std::count(any_valid.begin(), any_valid.end(), static_cast<unsigned char>(1)));
-  coarse.edge_weight = computeEdgeWeights(coarse.image, settings.edges);
-  return coarse;
+  coarse.valid_pixels = static_cast<int>(valid);
+  internal::computeEdgeWeightsInto(coarse.image, settings.edges,
+                                   coarse.edge_weight, scratch, threads);
 }
 
 /// Cold start: the first input with a usable observation (projected onto the
@@ -391,19 +400,28 @@ class SolverImpl {
 
   SolverSettings settings_;
 
-  SolveReport solve(const FusionProblem& problem, SolverState& out, bool warm) {
+  /// Solves into `report` (its vectors keep their capacity: no allocation in
+  /// steady state when the caller reuses it).
+  void solve(const FusionProblem& problem, SolverState& out, bool warm,
+             SolveReport& report) {
     const Clock::time_point start = Clock::now();
-    const bool has_budget = settings_.time_budget_ms > 0.0;
+    has_deadline_ = settings_.time_budget_ms > 0.0;
     deadline_ = start + std::chrono::duration_cast<Clock::duration>(
                             std::chrono::duration<double, std::milli>(
                                 settings_.time_budget_ms));
-    has_deadline_ = has_budget;
     threads_ = resolveThreads(settings_.num_threads);
 
-    SolveReport report;
-    std::vector<PreparedLevel> levels;
-    levels.push_back(prepareFinest(problem, settings_));
-    const PreparedLevel& finest = levels.front();
+    report.energies.clear();
+    std::vector<double> energies;
+    energies.swap(report.energies);
+    report = SolveReport();
+    report.energies.swap(energies);
+    report.energies.reserve(settings_.max_outer_iterations + 1);
+
+    if (levels_.empty()) levels_.resize(1);
+    internal::prepareFinestInto(problem, settings_, levels_[0], edge_scratch_,
+                                threads_);
+    const PreparedLevel& finest = levels_[0];
     const int W = finest.width, H = finest.height, L = finest.num_inputs;
     if (finest.valid_pixels == 0) {
       throw InputError(
@@ -412,32 +430,34 @@ class SolverImpl {
     }
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
-    report.filled_pixels = static_cast<int>(finest.width * finest.height) -
-                           finest.valid_pixels;
+    report.filled_pixels = W * H - finest.valid_pixels;
 
     const bool use_warm = warm && out.compatible(W, H, L);
     report.warm_started = use_warm;
     remaining_inner_ = settings_.max_total_inner_iterations;
 
+    int num_levels = 1;
     if (!use_warm) {
       // Coarse-to-fine on a cold start.
       int wanted = settings_.pyramid_levels;
       if (wanted == 0) {
-        const double missing = 1.0 - static_cast<double>(finest.valid_pixels) /
-                                         (static_cast<double>(W) * H);
+        const double missing =
+            1.0 - static_cast<double>(finest.valid_pixels) / (static_cast<double>(W) * H);
         wanted = missing > 0.005 ? 5 : 1;
       }
-      while (static_cast<int>(levels.size()) < wanted &&
-             std::min(levels.back().width, levels.back().height) >= 32) {
-        levels.push_back(downsample(levels.back(), settings_));
+      while (num_levels < wanted &&
+             std::min(levels_[num_levels - 1].width, levels_[num_levels - 1].height) >= 32) {
+        if (static_cast<int>(levels_.size()) <= num_levels) levels_.emplace_back();
+        downsampleInto(levels_[num_levels - 1], settings_, levels_[num_levels],
+                       edge_scratch_, threads_);
+        ++num_levels;
       }
     }
-    report.pyramid_levels = static_cast<int>(levels.size());
+    report.pyramid_levels = num_levels;
 
     IterationState& s = state_;
-    PlanarImage coarse_result;
-    for (int li = static_cast<int>(levels.size()) - 1; li >= 0; --li) {
-      const PreparedLevel& level = levels[li];
+    for (int li = num_levels - 1; li >= 0; --li) {
+      const PreparedLevel& level = levels_[li];
       s.resize(level.width, level.height, level.num_inputs);
       const bool finest_level = li == 0;
       if (finest_level && use_warm) {
@@ -448,8 +468,8 @@ class SolverImpl {
         s.p_v = out.dual_v;
         for (int l = 0; l < L; ++l) s.q[l] = out.dual_data[l];
       } else {
-        if (li + 1 < static_cast<int>(levels.size())) {
-          upsampleNormals(coarse_result, level, settings_.visibility, s.n0);
+        if (li + 1 < num_levels) {
+          upsampleNormals(coarse_result_, level, settings_.visibility, s.n0);
         } else {
           initializeCold(level, settings_.visibility, s.n0);
         }
@@ -458,23 +478,25 @@ class SolverImpl {
         for (PlanarImage& q : s.q) q.fill(0.0f);
       }
       runLevel(level, s, finest_level, report);
-      if (!finest_level) coarse_result = s.n0;
+      if (!finest_level) coarse_result_ = s.n0;
     }
 
     // Output: the accepted (unit) normals and the duals for the next frame.
     out.normals = s.n0;
     out.dual_h = s.p_h;
     out.dual_v = s.p_v;
-    out.dual_data = s.q;
+    out.dual_data.resize(L);
+    for (int l = 0; l < L; ++l) out.dual_data[l] = s.q[l];
     report.final_energy = report.energies.back();
-    report.seconds =
-        std::chrono::duration<double>(Clock::now() - start).count();
-    return report;
+    report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   }
 
  private:
   IterationState state_;
   PlanarImage candidate_;
+  std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
+  PlanarImage coarse_result_;
+  internal::EdgeWeightScratch edge_scratch_;
   Clock::time_point deadline_;
   bool has_deadline_ = false;
   int threads_ = 1;
@@ -611,12 +633,20 @@ const SolverSettings& Solver::settings() const { return impl_->settings_; }
 
 SolveReport Solver::solve(const FusionProblem& problem, SolverState& state,
                           bool warm_start) {
-  return impl_->solve(problem, state, warm_start);
+  SolveReport report;
+  impl_->solve(problem, state, warm_start, report);
+  return report;
+}
+
+void Solver::solve(const FusionProblem& problem, SolverState& state,
+                   bool warm_start, SolveReport& report) {
+  impl_->solve(problem, state, warm_start, report);
 }
 
 NormalMap Solver::solve(const FusionProblem& problem, SolveReport* report) {
   SolverState state;
-  SolveReport r = impl_->solve(problem, state, false);
+  SolveReport r;
+  impl_->solve(problem, state, false, r);
   if (report != nullptr) *report = r;
   return std::move(state.normals);
 }
@@ -624,7 +654,7 @@ NormalMap Solver::solve(const FusionProblem& problem, SolveReport* report) {
 double computeEnergy(const FusionProblem& problem,
                      const SolverSettings& settings, const NormalMap& normals) {
   settings.validate();
-  const PreparedLevel level = prepareFinest(problem, settings);
+  const PreparedLevel level = internal::prepareFinest(problem, settings);
   if (normals.channels() != 3 || normals.width() != level.width ||
       normals.height() != level.height) {
     throw InputError("computeEnergy: expected normals of the image's size with "

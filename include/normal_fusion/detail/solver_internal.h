@@ -135,11 +135,26 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
 }  // namespace reference
 
+/// Buffers of the edge-weight computation, reused from frame to frame.
+struct EdgeWeightScratch {
+  std::vector<float> mag_h, mag_v, plane, blurred, blur, kernel;
+};
+
+/// computeEdgeWeights() into reused buffers, with `threads` threads.
+void computeEdgeWeightsInto(const ColorImage& image,
+                            const EdgeWeightSettings& settings,
+                            PlanarImage& weights, EdgeWeightScratch& scratch,
+                            int threads);
+
 /// Validates the problem and builds the finest level: f_l in the optical
 /// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
 /// (0 where facing away in hard mode), and the edge weights.
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
+/// The same into reused buffers, with `threads` threads.
+void prepareFinestInto(const FusionProblem& problem,
+                       const SolverSettings& settings, PreparedLevel& level,
+                       EdgeWeightScratch& scratch, int threads);
 
 /// E(n) of ALGORITHM.md on a prepared level (double accumulation).
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,

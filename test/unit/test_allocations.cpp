@@ -1,0 +1,80 @@
+// Steady state: once running, solving frame after frame of one size performs
+// no heap allocation inside the solver (counted by replacing operator new).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <functional>
+#include <cstdlib>
+#include <new>
+
+#include "normal_fusion/solver.h"
+#include "test_util.h"
+
+namespace {
+std::atomic<long> g_allocations{0};
+std::atomic<bool> g_counting{false};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace normal_fusion {
+namespace {
+
+long allocationsDuring(const std::function<void()>& work) {
+  g_allocations.store(0);
+  g_counting.store(true);
+  work();
+  g_counting.store(false);
+  return g_allocations.load();
+}
+
+TEST(Allocations, NonePerFrameOnceRunning) {
+  for (SolverBackend backend : {SolverBackend::kFast, SolverBackend::kReference}) {
+    for (bool with_holes : {false, true}) {
+      NormalMap gt;
+      FusionProblem problem = test::cylinderScene(96, 64, &gt);
+      for (std::uint64_t l = 0; l < 2; ++l) {
+        NormalInput input;
+        input.normals = test::noisy(gt, 0.3, 5 + l);
+        problem.inputs.push_back(input);
+      }
+      if (with_holes) {  // cold starts then use the pyramid
+        for (int y = 10; y < 40; ++y) {
+          for (int x = 10; x < 40; ++x) {
+            for (NormalInput& in : problem.inputs) in.normals.at(2, y, x) = NAN;
+          }
+        }
+      }
+      SolverSettings settings;
+      settings.backend = backend;
+      settings.max_total_inner_iterations = 60;
+      settings.inner_iterations = 20;
+      settings.num_threads = 2;
+      Solver solver(settings);
+      SolverState state;
+      SolveReport report;
+      for (int frame = 0; frame < 3; ++frame) {
+        solver.solve(problem, state, !with_holes, report);
+      }
+      const long count = allocationsDuring([&] {
+        for (int frame = 0; frame < 3; ++frame) {
+          solver.solve(problem, state, !with_holes, report);
+        }
+      });
+      EXPECT_EQ(count, 0) << "backend " << toString(backend) << ", holes " << with_holes;
+      EXPECT_EQ(report.pyramid_levels > 1, with_holes);
+      // The counter works: a cold solve into a fresh state allocates.
+      EXPECT_GT(allocationsDuring([&] { solver.solve(problem); }), 0);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace normal_fusion
