@@ -1,4 +1,5 @@
-// Files in and out: normal maps (EXR, PFM, colour-coded PNG), images, camera_info YAML.
+// Files in and out: normal maps (EXR, PFM, colour-coded PNG), images,
+// camera_info YAML.
 #pragma once
 
 #include <string>
@@ -11,35 +12,53 @@ namespace io {
 /// Reads a normal map. Float files (.exr, .pfm): three channels x, y, z in the
 /// order OpenCV's imread returns them (no BGR/RGB swap), NaN = missing.
 /// 8-bit files (.png and others): colour-coded, c = (n + 1) / 2 * 255 with
-/// x -> R, y -> G, z -> B, black (0,0,0) = missing; decoded vectors are normalized.
-/// Throws InputError with the path and the problem.
+/// x -> R, y -> G, z -> B, black (0,0,0) = missing; decoded vectors are
+/// normalized. 16-bit colour-coded files are read alike (c / 65535); an alpha
+/// channel is ignored. Throws InputError with the path and the problem.
 NormalMap readNormalMap(const std::string& path);
 
-/// Writes a float normal map (.exr or .pfm by extension; NaN kept).
+/// Writes a float normal map (.exr or .pfm by extension; NaN kept). Throws
+/// InputError for another extension, a map without 3 planes or a failed write.
 void writeNormalMap(const std::string& path, const NormalMap& normals);
 
-/// Colour coding of a normal map: 3 planes R, G, B in [0, 1], black where missing.
+/// Reads a one-channel scalar map (confidence, weights): float files (.exr,
+/// .pfm) as stored, 8- or 16-bit grey images scaled to [0, 1]. Throws
+/// InputError.
+ScalarMap readScalarMap(const std::string& path);
+/// Writes a one-plane float map (.exr or .pfm by extension). Throws InputError.
+void writeScalarMap(const std::string& path, const ScalarMap& values);
+
+/// Colour coding of a normal map: 3 planes R, G, B in [0, 1], black where
+/// missing.
 ColorImage colorCode(const NormalMap& normals);
 /// Writes the colour-coded picture (8-bit PNG).
 void writeNormalPicture(const std::string& path, const NormalMap& normals);
 
 /// Reads an 8- or 16-bit grey or colour image into planes in [0, 1]
-/// (3 planes R, G, B for colour, 1 plane for grey).
+/// (3 planes R, G, B for colour, 1 plane for grey; alpha dropped).
+/// Throws InputError.
 ColorImage readImage(const std::string& path);
-/// Writes a 1- or 3-plane [0, 1] image as 8-bit (PNG by extension).
+/// Writes a 1- or 3-plane [0, 1] image as 8-bit (PNG by extension); values
+/// are clamped to [0, 1], NaN is written as 0.
 void writeImage(const std::string& path, const ColorImage& image);
 /// Writes a scalar map as a false-colour picture with values mapped from
-/// [lo, hi] (NaN black), for error images.
+/// [lo, hi] (NaN black), for error images. Colour map: OpenCV's INFERNO.
+/// Throws ParameterError unless lo < hi (both finite), InputError otherwise.
 void writeHeatmap(const std::string& path, const ScalarMap& values, double lo,
                   double hi);
 
 /// Reads intrinsics from a camera_info YAML in the ROS camera_calibration
 /// format (camera_matrix: {rows: 3, cols: 3, data: [...]}, image_width,
-/// image_height). Throws InputError.
+/// image_height). The other keys of the format are optional on input. Throws
+/// InputError for a missing file or key, a wrong shape, a non-positive size
+/// or a singular or non-finite K.
 CameraIntrinsics readCameraInfo(const std::string& path, int* width = nullptr,
                                 int* height = nullptr);
+/// Writes the same format for a rectified pinhole camera: plumb_bob with zero
+/// distortion, R = I, P = [K | 0]. Throws InputError for a bad K or size.
 void writeCameraInfo(const std::string& path, const CameraIntrinsics& K,
-                     int width, int height, const std::string& camera_name = "camera");
+                     int width, int height,
+                     const std::string& camera_name = "camera");
 
 }  // namespace io
 }  // namespace normal_fusion

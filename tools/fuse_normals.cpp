@@ -1,0 +1,490 @@
+// fuse_normals: regularizes and fuses normal maps of one frame from files.
+//
+//   fuse_normals --image RGB.png --camera-info CAMERA.yaml --normals A.exr
+//                [--normals B.exr ...] --output FUSED.exr [solver options]
+//
+// Exit codes: 0 success, 1 unusable input (files, sizes), 2 usage error
+// (unknown option, missing or bad value). Errors are one line on stderr that
+// starts with "fuse_normals: error: ".
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/io.h"
+#include "normal_fusion/settings.h"
+#include "normal_fusion/solver.h"
+#include "normal_fusion/types.h"
+
+namespace {
+
+namespace nf = normal_fusion;
+
+constexpr int kExitInputError = 1;
+constexpr int kExitUsageError = 2;
+
+/// A malformed command line: unknown option, missing or bad value.
+class UsageError : public std::runtime_error {
+ public:
+  explicit UsageError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// One --normals argument with the per-input options that followed it.
+struct InputSpec {
+  std::string normals_path;
+  std::string confidence_path;  ///< empty: confidence 1 everywhere
+  double weight = 1.0;
+  std::string orientation_name = "optical";
+  nf::Orientation orientation;
+};
+
+struct Options {
+  std::string image_path;
+  std::string camera_info_path;
+  std::string output_path;
+  std::vector<InputSpec> inputs;
+  nf::SolverSettings settings;
+  bool help = false;
+};
+
+void printUsage(std::ostream& out) {
+  const nf::SolverSettings d;
+  out << "Usage: fuse_normals --image RGB.png --camera-info CAMERA.yaml\n"
+         "                    --normals A.exr [input options]\n"
+         "                    [--normals B.exr [input options] ...]\n"
+         "                    --output FUSED.exr [solver options]\n"
+         "\n"
+         "Regularizes and fuses the normal maps of one frame, guided by its\n"
+         "image. Writes the fused normals (float, x y z per pixel, camera\n"
+         "optical frame) to --output (.exr or .pfm) and a colour-coded "
+         "picture\n"
+         "beside it (same stem, .png).\n"
+         "\n"
+         "Files:\n"
+         "  --image PATH          guide image, 8/16-bit grey or colour\n"
+         "  --camera-info PATH    ROS camera_calibration YAML of the image\n"
+         "  --normals PATH        a normal map (.exr/.pfm float, or a colour-\n"
+         "                        coded 8-bit .png); repeat for more inputs\n"
+         "  --output PATH         fused normal map (.exr or .pfm)\n"
+         "\n"
+         "Input options (apply to the most recent --normals):\n"
+         "  --weight W            global weight of this input (default 1)\n"
+         "  --confidence PATH     per-pixel confidence in [0, 1], one channel\n"
+         "  --orientation O       optical | optical_flipped | opengl | nine\n"
+         "                        numbers of a signed permutation (row-major)\n"
+         "\n"
+         "Solver options (defaults in brackets):\n"
+         "  --lambda X            data weight ["
+      << d.lambda << "]\n"
+      << "  --eps X               Huber threshold, 0 = plain TV ["
+      << d.huber_eps << "]\n"
+      << "  --penalty P           l2 | squared_l2 [" << nf::toString(d.penalty)
+      << "]\n"
+      << "  --visibility V        off | hard | soft ["
+      << nf::toString(d.visibility) << "]\n"
+      << "  --edge-alpha X        edge weight exp(-alpha g^beta) or\n"
+      << "                        1 / (1 + alpha g^beta) of the image\n"
+      << "                        gradient g [" << d.edges.alpha << "]\n"
+      << "  --edge-beta X         exponent beta [" << d.edges.beta << "]\n"
+      << "  --edge-wmin X         floor of the edge weights [" << d.edges.w_min
+      << "]\n"
+      << "  --edge-sigma X        Gaussian pre-smoothing in pixels ["
+      << d.edges.smoothing_sigma << "]\n"
+      << "  --edge-color C        luminance | color_max ["
+      << nf::toString(d.edges.color_mode) << "]\n"
+      << "  --edge-function F     exponential | rational ["
+      << nf::toString(d.edges.function) << "]\n"
+      << "  --no-edges            unguided TV (all edge weights 1)\n"
+      << "  --inner-iterations N  Chambolle-Pock iterations per outer step ["
+      << d.inner_iterations << "]\n"
+      << "  --max-outer N         majorize-minimize steps ["
+      << d.max_outer_iterations << "]\n"
+      << "  --max-iterations N    inner iterations in all ["
+      << d.max_total_inner_iterations << "]\n"
+      << "  --tolerance X         relative energy decrease to stop ["
+      << d.relative_tolerance << "]\n"
+      << "  --time-budget-ms X    wall-clock budget, 0 = none ["
+      << d.time_budget_ms << "]\n"
+      << "  --pyramid-levels N    1 = off, 0 = automatic [" << d.pyramid_levels
+      << "]\n"
+      << "  --threads N           0 = all hardware threads [" << d.num_threads
+      << "]\n"
+      << "  --backend B           fast | reference [" << nf::toString(d.backend)
+      << "]\n"
+      << "  --help                this text\n"
+      << "\n"
+      << "Exit codes: 0 success, 1 unusable input, 2 usage error.\n";
+}
+
+double parseDouble(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size() || !std::isfinite(value)) {
+    throw UsageError(option + ": expected a finite number, got '" + text + "'");
+  }
+  return value;
+}
+
+int parseInt(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  long value = 0;
+  try {
+    value = std::stol(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size() || value < -2147483647L ||
+      value > 2147483647L) {
+    throw UsageError(option + ": expected an integer, got '" + text + "'");
+  }
+  return static_cast<int>(value);
+}
+
+/// Runs a parser of settings.h, turning its ParameterError into a usage error.
+template <typename Parse>
+auto parseName(const std::string& option, const std::string& text, Parse parse)
+    -> decltype(parse(text)) {
+  try {
+    return parse(text);
+  } catch (const nf::ParameterError& e) {
+    throw UsageError(option + ": " + e.what());
+  }
+}
+
+bool hasFloatExtension(const std::string& path) {
+  const std::string ext = std::filesystem::path(path).extension().string();
+  return ext == ".exr" || ext == ".EXR" || ext == ".pfm" || ext == ".PFM";
+}
+
+Options parseArguments(int argc, char** argv) {
+  Options options;
+  nf::SolverSettings& s = options.settings;
+  for (int i = 1; i < argc; ++i) {
+    std::string option = argv[i];
+    std::string inline_value;
+    bool has_inline_value = false;
+    if (option.rfind("--", 0) != 0) {
+      throw UsageError("unexpected argument '" + option +
+                       "' (options start with --; see --help)");
+    }
+    const std::size_t equals = option.find('=');
+    if (equals != std::string::npos) {
+      inline_value = option.substr(equals + 1);
+      option = option.substr(0, equals);
+      has_inline_value = true;
+    }
+    // Flags without a value.
+    if (option == "--help" || option == "--no-edges") {
+      if (has_inline_value) throw UsageError(option + " takes no value");
+      if (option == "--help") options.help = true;
+      if (option == "--no-edges") s.edges.enabled = false;
+      continue;
+    }
+    const auto value = [&]() -> std::string {
+      if (has_inline_value) return inline_value;
+      if (i + 1 >= argc) throw UsageError(option + " needs a value");
+      return argv[++i];
+    };
+    const auto currentInput = [&]() -> InputSpec& {
+      if (options.inputs.empty()) {
+        throw UsageError(option + " must follow the --normals it applies to");
+      }
+      return options.inputs.back();
+    };
+    if (option == "--image") {
+      options.image_path = value();
+    } else if (option == "--camera-info") {
+      options.camera_info_path = value();
+    } else if (option == "--output") {
+      options.output_path = value();
+    } else if (option == "--normals") {
+      InputSpec input;
+      input.normals_path = value();
+      options.inputs.push_back(input);
+    } else if (option == "--weight") {
+      InputSpec& input = currentInput();
+      input.weight = parseDouble(option, value());
+      if (input.weight < 0.0) {
+        throw UsageError(option + ": expected a weight >= 0, got " +
+                         std::to_string(input.weight));
+      }
+    } else if (option == "--confidence") {
+      currentInput().confidence_path = value();
+    } else if (option == "--orientation") {
+      InputSpec& input = currentInput();
+      input.orientation_name = value();
+      input.orientation = parseName(option, input.orientation_name,
+                                    nf::Orientation::fromString);
+    } else if (option == "--lambda") {
+      s.lambda = parseDouble(option, value());
+    } else if (option == "--eps") {
+      s.huber_eps = parseDouble(option, value());
+    } else if (option == "--penalty") {
+      s.penalty = parseName(option, value(), nf::parseDataPenalty);
+    } else if (option == "--visibility") {
+      s.visibility = parseName(option, value(), nf::parseVisibilityMode);
+    } else if (option == "--edge-alpha") {
+      s.edges.alpha = parseDouble(option, value());
+    } else if (option == "--edge-beta") {
+      s.edges.beta = parseDouble(option, value());
+    } else if (option == "--edge-wmin") {
+      s.edges.w_min = parseDouble(option, value());
+    } else if (option == "--edge-sigma") {
+      s.edges.smoothing_sigma = parseDouble(option, value());
+    } else if (option == "--edge-color") {
+      s.edges.color_mode = parseName(option, value(), nf::parseEdgeColorMode);
+    } else if (option == "--edge-function") {
+      s.edges.function =
+          parseName(option, value(), nf::parseEdgeWeightFunction);
+    } else if (option == "--inner-iterations") {
+      s.inner_iterations = parseInt(option, value());
+    } else if (option == "--max-outer") {
+      s.max_outer_iterations = parseInt(option, value());
+    } else if (option == "--max-iterations") {
+      s.max_total_inner_iterations = parseInt(option, value());
+    } else if (option == "--tolerance") {
+      s.relative_tolerance = parseDouble(option, value());
+    } else if (option == "--time-budget-ms") {
+      s.time_budget_ms = parseDouble(option, value());
+    } else if (option == "--pyramid-levels") {
+      s.pyramid_levels = parseInt(option, value());
+    } else if (option == "--threads") {
+      s.num_threads = parseInt(option, value());
+    } else if (option == "--backend") {
+      s.backend = parseName(option, value(), nf::parseSolverBackend);
+    } else {
+      throw UsageError("unknown option '" + option + "' (see --help)");
+    }
+  }
+  if (options.help) return options;
+  if (options.image_path.empty()) throw UsageError("missing --image");
+  if (options.camera_info_path.empty()) {
+    throw UsageError("missing --camera-info");
+  }
+  if (options.inputs.empty()) throw UsageError("missing --normals");
+  if (options.output_path.empty()) throw UsageError("missing --output");
+  if (!hasFloatExtension(options.output_path)) {
+    throw UsageError("--output: expected a .exr or .pfm path, got '" +
+                     options.output_path + "'");
+  }
+  try {
+    s.validate();
+  } catch (const nf::ParameterError& e) {
+    throw UsageError(std::string("solver settings: ") + e.what());
+  }
+  return options;
+}
+
+/// Sends stderr (file descriptor 2) to /dev/null while it lives: the image
+/// codecs print their own diagnostics there (libpng, OpenCV), and the tool's
+/// errors, which carry the same facts, must stay one line.
+class SilencedStderr {
+ public:
+  SilencedStderr() {
+    std::cerr.flush();
+    std::fflush(stderr);
+    saved_fd_ = ::dup(STDERR_FILENO);
+    const int null_fd = ::open("/dev/null", O_WRONLY);
+    if (saved_fd_ >= 0 && null_fd >= 0) ::dup2(null_fd, STDERR_FILENO);
+    if (null_fd >= 0) ::close(null_fd);
+  }
+  ~SilencedStderr() {
+    std::fflush(stderr);
+    if (saved_fd_ >= 0) {
+      ::dup2(saved_fd_, STDERR_FILENO);
+      ::close(saved_fd_);
+    }
+  }
+  SilencedStderr(const SilencedStderr&) = delete;
+  SilencedStderr& operator=(const SilencedStderr&) = delete;
+
+ private:
+  int saved_fd_ = -1;
+};
+
+/// Fails before any work when the output cannot be written where asked.
+void checkOutputDirectory(const std::string& output_path) {
+  const std::filesystem::path parent =
+      std::filesystem::path(output_path).parent_path();
+  std::error_code ec;
+  if (!parent.empty() && !std::filesystem::is_directory(parent, ec)) {
+    throw nf::InputError("--output '" + output_path + "': the directory '" +
+                         parent.string() + "' does not exist");
+  }
+}
+
+std::string sizeText(int width, int height) {
+  return std::to_string(width) + "x" + std::to_string(height);
+}
+
+/// Throws InputError unless a map read from `path` has the image's size.
+void checkSameSize(const std::string& what, const std::string& path,
+                   const nf::PlanarImage& map, const nf::ColorImage& image,
+                   const std::string& image_path) {
+  if (map.sameSize(image)) return;
+  std::string message = what + " '" + path + "' is " +
+                        sizeText(map.width(), map.height()) + ", the image '" +
+                        image_path + "' is " +
+                        sizeText(image.width(), image.height());
+  const bool same_aspect =
+      static_cast<long long>(map.width()) * image.height() ==
+      static_cast<long long>(map.height()) * image.width();
+  if (same_aspect && map.width() < image.width()) {
+    message +=
+        ": lower-resolution inputs are not supported yet; resample them to "
+        "the image size";
+  } else {
+    message += ": expected the same size";
+  }
+  throw nf::InputError(message);
+}
+
+nf::FusionProblem loadProblem(const Options& options) {
+  nf::FusionProblem problem;
+  problem.image = nf::io::readImage(options.image_path);
+  int info_width = 0;
+  int info_height = 0;
+  problem.K = nf::io::readCameraInfo(options.camera_info_path, &info_width,
+                                     &info_height);
+  if (info_width != problem.image.width() ||
+      info_height != problem.image.height()) {
+    throw nf::InputError(
+        "camera_info '" + options.camera_info_path + "' is for " +
+        sizeText(info_width, info_height) + ", the image '" +
+        options.image_path + "' is " +
+        sizeText(problem.image.width(), problem.image.height()) +
+        ": expected the same size");
+  }
+  for (const InputSpec& spec : options.inputs) {
+    nf::NormalInput input;
+    input.normals = nf::io::readNormalMap(spec.normals_path);
+    checkSameSize("normal map", spec.normals_path, input.normals, problem.image,
+                  options.image_path);
+    if (!spec.confidence_path.empty()) {
+      input.confidence = nf::io::readScalarMap(spec.confidence_path);
+      checkSameSize("confidence map", spec.confidence_path, input.confidence,
+                    problem.image, options.image_path);
+    }
+    input.weight = spec.weight;
+    input.orientation = spec.orientation;
+    problem.inputs.push_back(std::move(input));
+  }
+  return problem;
+}
+
+void printReport(std::ostream& out, const Options& options,
+                 const nf::FusionProblem& problem,
+                 const nf::SolveReport& report,
+                 const std::string& picture_path) {
+  const auto yesNo = [](bool b) { return b ? "yes" : "no"; };
+  out << "fuse_normals: fused " << report.num_inputs << " input(s) on a "
+      << sizeText(problem.image.width(), problem.image.height()) << " image\n";
+  for (std::size_t l = 0; l < options.inputs.size(); ++l) {
+    const InputSpec& spec = options.inputs[l];
+    out << "  input " << l << ":            " << spec.normals_path
+        << " (weight " << spec.weight << ", orientation "
+        << spec.orientation_name;
+    if (!spec.confidence_path.empty()) {
+      out << ", confidence " << spec.confidence_path;
+    }
+    out << ")\n";
+  }
+  out << "  outer iterations:   " << report.outer_iterations << " ("
+      << report.rejected_outer_steps << " rejected)\n"
+      << "  inner iterations:   " << report.inner_iterations
+      << " at full size, " << report.coarse_inner_iterations
+      << " on coarser levels (" << report.pyramid_levels
+      << " pyramid level(s))\n"
+      << "  energy:             " << std::setprecision(8)
+      << report.initial_energy << " -> " << report.final_energy << "\n"
+      << "  energy per step:   ";
+  for (double e : report.energies) out << " " << std::setprecision(8) << e;
+  out << "\n"
+      << "  time:               " << std::fixed << std::setprecision(3)
+      << report.seconds * 1000.0 << " ms\n"
+      << std::defaultfloat
+      << "  warm start:         " << yesNo(report.warm_started) << "\n"
+      << "  converged:          " << yesNo(report.converged)
+      << " (budget exhausted: " << yesNo(report.budget_exhausted) << ")\n"
+      << "  valid pixels:       " << report.valid_pixels << "\n"
+      << "  filled pixels:      " << report.filled_pixels << "\n"
+      << "  output:             " << options.output_path << ", " << picture_path
+      << "\n";
+}
+
+int run(int argc, char** argv) {
+  const Options options = parseArguments(argc, argv);
+  if (options.help) {
+    printUsage(std::cout);
+    return 0;
+  }
+  checkOutputDirectory(options.output_path);
+  nf::FusionProblem problem;
+  {
+    const SilencedStderr silenced;
+    problem = loadProblem(options);
+  }
+  nf::Solver solver(options.settings);
+  nf::SolveReport report;
+  const nf::NormalMap fused = solver.solve(problem, &report);
+  const std::string picture_path = std::filesystem::path(options.output_path)
+                                       .replace_extension(".png")
+                                       .string();
+  {
+    const SilencedStderr silenced;
+    nf::io::writeNormalMap(options.output_path, fused);
+    nf::io::writeNormalPicture(picture_path, fused);
+  }
+  printReport(std::cout, options, problem, report, picture_path);
+  return 0;
+}
+
+/// Prints one line: the message with line breaks replaced by spaces.
+void printError(const std::string& message) {
+  std::string line = message;
+  for (char& c : line) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  std::cerr << "fuse_normals: error: " << line << std::endl;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const UsageError& e) {
+    printError(e.what());
+    return kExitUsageError;
+  } catch (const nf::ParameterError& e) {
+    printError(e.what());
+    return kExitUsageError;
+  } catch (const nf::InputError& e) {
+    printError(e.what());
+    return kExitInputError;
+  } catch (const std::bad_alloc&) {
+    printError("out of memory");
+    return kExitInputError;
+  } catch (const std::exception& e) {
+    printError(e.what());
+    return kExitInputError;
+  } catch (...) {
+    printError("unexpected failure");
+    return kExitInputError;
+  }
+}
