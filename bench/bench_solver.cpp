@@ -20,13 +20,15 @@ constexpr int kWidth = 640;
 constexpr int kHeight = 480;
 
 nf::FusionProblem makeProblem(int num_inputs) {
-  const nf::synthetic::Frame frame = nf::synthetic::renderScene(0, kWidth, kHeight);
+  const nf::synthetic::Frame frame =
+      nf::synthetic::renderScene(0, kWidth, kHeight);
   nf::FusionProblem problem;
   problem.image = frame.image;
   problem.K = frame.K;
   for (int l = 0; l < num_inputs; ++l) {
     nf::NormalInput input;
-    input.normals = nf::synthetic::addPaperNoise(frame.normals_gt, 0.4, 100 + l);
+    input.normals =
+        nf::synthetic::addPaperNoise(frame.normals_gt, 0.4, 100 + l);
     problem.inputs.push_back(input);
   }
   return problem;
@@ -39,9 +41,11 @@ void BM_InnerIterations(benchmark::State& state) {
   const int threads = static_cast<int>(state.range(2));
   nf::SolverSettings settings;
   const nf::FusionProblem problem = makeProblem(L);
-  const nf::internal::PreparedLevel level = nf::internal::prepareFinest(problem, settings);
+  const nf::internal::PreparedLevel level =
+      nf::internal::prepareFinest(problem, settings);
   nf::internal::InnerParams params;
-  params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(8.0 + L));
+  params.tau = params.sigma = params.sigma_data =
+      static_cast<float>(0.99 / std::sqrt(8.0 + L));
   params.huber_eps = static_cast<float>(settings.huber_eps);
   params.penalty = settings.penalty;
   params.soft_visibility = true;
@@ -86,9 +90,11 @@ void BM_PaperWorkload(benchmark::State& state) {
   nf::SolverState solver_state;
   for (auto _ : state) {
     const nf::SolveReport report = solver.solve(problem, solver_state, false);
-    if (report.inner_iterations != 1000) state.SkipWithError("expected 1000 iterations");
+    if (report.inner_iterations != 1000)
+      state.SkipWithError("expected 1000 iterations");
   }
-  state.SetLabel("640x480 L=1 1000 inner iterations threads=" + std::to_string(threads));
+  state.SetLabel("640x480 L=1 1000 inner iterations threads=" +
+                 std::to_string(threads));
 }
 
 }  // namespace

@@ -33,11 +33,12 @@ enum class EdgeWeightFunction {
 /// Which implementation runs the inner iterations.
 enum class SolverBackend {
   kFast,       ///< fused, multithreaded kernels
-  kReference,  ///< plain, readable kernels: the oracle the fast path is tested against
+  kReference,  ///< plain, readable kernels: the oracle the fast path is tested
+               ///< against
 };
 
 struct EdgeWeightSettings {
-  bool enabled = true;  ///< false: w_h = w_v = 1 (plain, unguided TV)
+  bool enabled = true;           ///< false: w_h = w_v = 1 (plain, unguided TV)
   double smoothing_sigma = 1.2;  ///< Gaussian pre-smoothing in pixels (0: none)
   double alpha = 10.0;
   double beta = 1.0;
@@ -55,11 +56,13 @@ struct SolverSettings {
   EdgeWeightSettings edges;
 
   // Iterations and stopping.
-  int inner_iterations = 50;        ///< Chambolle-Pock iterations per outer step
-  int max_outer_iterations = 40;    ///< majorize-minimize steps (cap)
-  int max_total_inner_iterations = 1000;  ///< cap over all outer steps and levels
-  double relative_tolerance = 1e-4;  ///< stop when (E_prev - E) / E_prev falls below
-  double time_budget_ms = 0.0;       ///< wall-clock budget; 0 = none (anytime)
+  int inner_iterations = 50;      ///< Chambolle-Pock iterations per outer step
+  int max_outer_iterations = 40;  ///< majorize-minimize steps (cap)
+  int max_total_inner_iterations =
+      1000;  ///< cap over all outer steps and levels
+  double relative_tolerance =
+      1e-4;                     ///< stop when (E_prev - E) / E_prev falls below
+  double time_budget_ms = 0.0;  ///< wall-clock budget; 0 = none (anytime)
 
   /// Coarse-to-fine levels on a cold start: 1 = off, 0 = automatic (used when
   /// some pixels have no valid input), n > 1 = exactly n levels (fewer if the
@@ -69,8 +72,12 @@ struct SolverSettings {
   // Execution.
   int num_threads = 0;  ///< 0 = all hardware threads
   SolverBackend backend = SolverBackend::kFast;
-  /// Step sizes; 0 = automatic (tau = sigma = 0.99 / sqrt(8 + L)). When set,
-  /// tau * sigma * (8 + L) must be below 1.
+  /// Automatic steps: diagonal preconditioning (tau = 1 / (4 + L), sigma =
+  /// 1/2 for the differences and 1 for the data terms) when true, else the
+  /// scalar steps tau = sigma = 0.99 / sqrt(8 + L).
+  bool preconditioning = false;
+  /// Explicit step sizes (override the automatic ones); 0 = automatic. When
+  /// set, tau * sigma * (8 + L) must be below 1.
   double tau = 0.0;
   double sigma = 0.0;
 
@@ -78,8 +85,9 @@ struct SolverSettings {
   void validate() const;
 };
 
-/// Parses "l2" / "squared_l2", "off" / "hard" / "soft", "luminance" / "color_max",
-/// "exponential" / "rational", "fast" / "reference". Throws ParameterError.
+/// Parses "l2" / "squared_l2", "off" / "hard" / "soft", "luminance" /
+/// "color_max", "exponential" / "rational", "fast" / "reference". Throws
+/// ParameterError.
 DataPenalty parseDataPenalty(const std::string& name);
 VisibilityMode parseVisibilityMode(const std::string& name);
 EdgeColorMode parseEdgeColorMode(const std::string& name);

@@ -12,25 +12,25 @@ namespace normal_fusion {
 
 /// One normal-map input of a fusion problem.
 struct NormalInput {
-  NormalMap normals;      ///< 3 planes, as the producer gives them
-  ScalarMap confidence;   ///< optional 1 plane in [0, 1] (empty = 1 everywhere)
-  double weight = 1.0;    ///< global weight of this data term (>= 0)
+  NormalMap normals;     ///< 3 planes, as the producer gives them
+  ScalarMap confidence;  ///< optional 1 plane in [0, 1] (empty = 1 everywhere)
+  double weight = 1.0;   ///< global weight of this data term (>= 0)
   Orientation orientation;  ///< applied on input: n_optical = M n_input
 };
 
 /// What one frame gives the solver.
 struct FusionProblem {
-  ColorImage image;       ///< guide image, 1 or 3 planes in [0, 1]
-  CameraIntrinsics K;     ///< intrinsics of the image
+  ColorImage image;                 ///< guide image, 1 or 3 planes in [0, 1]
+  CameraIntrinsics K;               ///< intrinsics of the image
   std::vector<NormalInput> inputs;  ///< L >= 1 inputs, in priority order
 };
 
 /// Solver state carried from frame to frame (warm start): the normals and all
 /// dual variables, in global 3-D coordinates.
 struct SolverState {
-  NormalMap normals;                 ///< 3 planes, unit length
-  PlanarImage dual_h;                ///< p_h, 3 planes
-  PlanarImage dual_v;                ///< p_v, 3 planes
+  NormalMap normals;                   ///< 3 planes, unit length
+  PlanarImage dual_h;                  ///< p_h, 3 planes
+  PlanarImage dual_v;                  ///< p_v, 3 planes
   std::vector<PlanarImage> dual_data;  ///< q_l, 3 planes each
 
   /// True when the state can warm-start a problem of this size and input count.
@@ -41,10 +41,15 @@ struct SolverState {
 /// What a solve did.
 struct SolveReport {
   int outer_iterations = 0;  ///< outer steps at the finest level
-  int rejected_outer_steps = 0;  ///< steps whose normalized result raised E (kept n0)
+  int rejected_outer_steps =
+      0;  ///< steps whose normalized result raised E (kept n0)
   int inner_iterations = 0;  ///< Chambolle-Pock iterations at the finest level
-  int coarse_inner_iterations = 0;  ///< iterations on the coarser pyramid levels
-  std::vector<double> energies;  ///< E at the finest level: start, then each accepted outer step
+  int coarse_inner_iterations =
+      0;                         ///< iterations on the coarser pyramid levels
+  std::vector<double> energies;  ///< E at the finest level: start, then each
+                                 ///< accepted outer step
+  std::vector<double> energy_seconds;  ///< when each of `energies` was reached,
+                                       ///< since the solve began
   double initial_energy = 0.0;
   double final_energy = 0.0;
   double seconds = 0.0;
@@ -68,8 +73,8 @@ class Solver {
   Solver(Solver&&) noexcept;
   Solver& operator=(Solver&&) noexcept;
 
-  /// Validates and replaces the settings (throws ParameterError, keeping the old
-  /// ones). Takes effect on the next solve.
+  /// Validates and replaces the settings (throws ParameterError, keeping the
+  /// old ones). Takes effect on the next solve.
   void setSettings(const SolverSettings& settings);
   const SolverSettings& settings() const;
 

@@ -1,4 +1,5 @@
-// Basic image and camera types of the normal_fusion library (no ROS, no OpenCV).
+// Basic image and camera types of the normal_fusion library (no ROS, no
+// OpenCV).
 #pragma once
 
 #include <array>
@@ -84,7 +85,8 @@ class PlanarImage {
 using NormalMap = PlanarImage;
 /// One plane of scalars (confidence, weights).
 using ScalarMap = PlanarImage;
-/// The guide image: one plane (grey) or three planes (R, G, B), values in [0, 1].
+/// The guide image: one plane (grey) or three planes (R, G, B), values in [0,
+/// 1].
 using ColorImage = PlanarImage;
 
 /// True when the pixel holds an observation: finite and not the zero vector.

@@ -70,7 +70,8 @@ void sobelMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
   for (int y = 0; y < H; ++y) {
     const float* up = img + static_cast<std::size_t>(std::max(y - 1, 0)) * W;
     const float* mid = img + static_cast<std::size_t>(y) * W;
-    const float* down = img + static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
+    const float* down =
+        img + static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
     for (int x = 0; x < W; ++x) {
       const int xl = std::max(x - 1, 0), xr = std::min(x + 1, W - 1);
       const float gx = (up[xr] + 2.0f * mid[xr] + down[xr]) -
@@ -131,12 +132,14 @@ void computeEdgeWeightsInto(const ColorImage& image,
                       scratch.mag_v.data(), W, H, threads);
   }
 
-  const bool exponential = settings.function == EdgeWeightFunction::kExponential;
+  const bool exponential =
+      settings.function == EdgeWeightFunction::kExponential;
   const double alpha = settings.alpha, beta = settings.beta;
   const float w_min = static_cast<float>(settings.w_min);
   auto weight_of = [&](float g) {
     const double gb = beta == 1.0 ? g : std::pow(static_cast<double>(g), beta);
-    const double w = exponential ? std::exp(-alpha * gb) : 1.0 / (1.0 + alpha * gb);
+    const double w =
+        exponential ? std::exp(-alpha * gb) : 1.0 / (1.0 + alpha * gb);
     return std::max(w_min, static_cast<float>(w));
   };
   const float* mag_h = scratch.mag_h.data();

@@ -54,12 +54,14 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
 /// direction, with g = next - here given as two row pointers.
 NF_MULTIVERSION
-void huberDualRow(int n, float sigma, float sigma_eps, const float* __restrict w,
-                  const float* __restrict here_x, const float* __restrict here_y,
-                  const float* __restrict here_z, const float* __restrict next_x,
-                  const float* __restrict next_y, const float* __restrict next_z,
-                  float* __restrict px, float* __restrict py,
-                  float* __restrict pz) {
+void huberDualRow(int n, float sigma, float sigma_eps,
+                  const float* __restrict w, const float* __restrict here_x,
+                  const float* __restrict here_y,
+                  const float* __restrict here_z,
+                  const float* __restrict next_x,
+                  const float* __restrict next_y,
+                  const float* __restrict next_z, float* __restrict px,
+                  float* __restrict py, float* __restrict pz) {
   for (int x = 0; x < n; ++x) {
     const float shrink = w[x] / (w[x] + sigma_eps + kTiny);
     const float ax = (px[x] + sigma * (next_x[x] - here_x[x])) * shrink;
@@ -117,6 +119,7 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
   const Planes3 pv = rowOf(s.p_v, off);
   const float sigma = prm.sigma;
   const float sigma_eps = prm.sigma * prm.huber_eps;
+  const float sigma_data = prm.sigma_data;
   // p_h: grad_h nbar = nbar(x+1) - nbar(x), 0 on the last column (so the
   // last column sees next = here).
   huberDualRow(W - 1, sigma, sigma_eps, level.edge_weight.plane(0) + off, nb.x,
@@ -128,18 +131,19 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
   // p_v: grad_v nbar = nbar(y+1) - nbar(y), 0 on the last row.
   const ConstPlanes3 nb_next = rowOf(static_cast<const PlanarImage&>(s.nbar),
                                      y + 1 < level.height ? off + W : off);
-  huberDualRow(W, sigma, sigma_eps, level.edge_weight.plane(1) + off, nb.x, nb.y,
-               nb.z, nb_next.x, nb_next.y, nb_next.z, pv.x, pv.y, pv.z);
+  huberDualRow(W, sigma, sigma_eps, level.edge_weight.plane(1) + off, nb.x,
+               nb.y, nb.z, nb_next.x, nb_next.y, nb_next.z, pv.x, pv.y, pv.z);
   // q_l, one data term at a time.
   for (int l = 0; l < level.num_inputs; ++l) {
     const ConstPlanes3 f = rowOf(level.data[l], off);
     const float* c_w = level.data_weight[l].plane(0) + off;
     const Planes3 q = rowOf(s.q[l], off);
     if (prm.penalty == DataPenalty::kL2) {
-      dataDualRowL2(W, sigma, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x, q.y, q.z);
+      dataDualRowL2(W, sigma_data, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x,
+                    q.y, q.z);
     } else {
-      dataDualRowSquared(W, sigma, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x,
-                         q.y, q.z);
+      dataDualRowSquared(W, sigma_data, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z,
+                         q.x, q.y, q.z);
     }
   }
 }
@@ -148,14 +152,15 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
 /// (p_v(y) - p_v(y-1)), Dirichlet ends (p_h(-1) = 0, p_h(W-1) read as 0,
 /// p_v(-1) = 0, p_v(H-1) read as 0: `here_v_on` / `up` are 0 or 1).
 NF_MULTIVERSION
-void divergenceRow(int W, const float* __restrict ph, const float* __restrict pv,
-                   const float* __restrict pv_up, float here_v_on, float up_on,
-                   float* __restrict d) {
+void divergenceRow(int W, const float* __restrict ph,
+                   const float* __restrict pv, const float* __restrict pv_up,
+                   float here_v_on, float up_on, float* __restrict d) {
   d[0] = ph[0] + here_v_on * pv[0] - up_on * pv_up[0];
   for (int x = 1; x < W - 1; ++x) {
     d[x] = (ph[x] - ph[x - 1]) + here_v_on * pv[x] - up_on * pv_up[x];
   }
-  if (W > 1) d[W - 1] = -ph[W - 2] + here_v_on * pv[W - 1] - up_on * pv_up[W - 1];
+  if (W > 1)
+    d[W - 1] = -ph[W - 2] + here_v_on * pv[W - 1] - up_on * pv_up[W - 1];
 }
 
 /// d -= q for one row and one channel.
@@ -234,7 +239,8 @@ void primalRow(const PreparedLevel& level, const InnerParams& prm,
   const ConstPlanes3 n0 = rowOf(static_cast<const PlanarImage&>(s.n0), off);
   const Planes3 n = rowOf(s.n, off);
   const Planes3 nb = rowOf(s.nbar, off);
-  auto update = prm.soft_visibility ? primalUpdateRow<true> : primalUpdateRow<false>;
+  auto update =
+      prm.soft_visibility ? primalUpdateRow<true> : primalUpdateRow<false>;
   update(W, prm.tau, d[0], d[1], d[2], n0.x, n0.y, n0.z, r0x, r0y, r0z,
          static_cast<float>(Ki[0]), static_cast<float>(Ki[3]),
          static_cast<float>(Ki[6]), n.x, n.y, n.z, nb.x, nb.y, nb.z);
@@ -266,14 +272,16 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
     std::vector<std::atomic<long>> fresh(threads);
     progress.swap(fresh);
   }
-  for (int t = 0; t < threads; ++t) progress[t].store(0, std::memory_order_relaxed);
+  for (int t = 0; t < threads; ++t)
+    progress[t].store(0, std::memory_order_relaxed);
   const int per_round = threads * depth;
   const int rounds = (iterations + per_round - 1) / per_round;
 
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
-    float* scratch = state.row_scratch.data() + static_cast<std::size_t>(t) * 3 * W;
+    float* scratch =
+        state.row_scratch.data() + static_cast<std::size_t>(t) * 3 * W;
     int remaining = iterations;
     for (int round = 0; round < rounds; ++round) {
       // Iterations of this round, split as evenly as possible over threads.
@@ -283,17 +291,19 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
       // Whose rows this thread's first iteration depends on: the previous
       // thread in this round, or the last thread of the previous round.
       const int pred = t > 0 ? t - 1 : threads - 1;
-      const long pred_base =
-          t > 0 ? static_cast<long>(round) * H : static_cast<long>(round - 1) * H;
+      const long pred_base = t > 0 ? static_cast<long>(round) * H
+                                   : static_cast<long>(round - 1) * H;
       const bool must_wait = !(t == 0 && round == 0);
       if (mine == 0) {
         // Nothing to do: pass the predecessor's progress on.
         if (must_wait) {
-          while (progress[pred].load(std::memory_order_acquire) < pred_base + H) {
+          while (progress[pred].load(std::memory_order_acquire) <
+                 pred_base + H) {
             std::this_thread::yield();
           }
         }
-        progress[t].store(static_cast<long>(round + 1) * H, std::memory_order_release);
+        progress[t].store(static_cast<long>(round + 1) * H,
+                          std::memory_order_release);
         continue;
       }
       for (int step = 0; step < H + mine - 1; ++step) {

@@ -9,8 +9,8 @@ namespace normal_fusion {
 namespace internal {
 
 void IterationState::resize(int width, int height, int num_inputs) {
-  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v,
-                             &div, &q_sum}) {
+  for (PlanarImage* image :
+       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
     image->resize(width, height, 3);
   }
   q.resize(num_inputs);
@@ -68,8 +68,8 @@ void clampVector(float v[3], float radius) {
 
 /// Dual step of the weighted Huber term (prox of sigma (w huber_eps)^*):
 /// p <- clamp_w((p + sigma grad nbar) / (1 + sigma eps / w)).
-void proxHuberDual(PlanarImage& p, const PlanarImage& grad,
-                   const float* weight, float sigma, float eps) {
+void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
+                   float sigma, float eps) {
   const std::size_t N = p.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
     const float w = weight[i];
@@ -86,9 +86,8 @@ void proxHuberDual(PlanarImage& p, const PlanarImage& grad,
 /// Dual step of one data term (prox of sigma F_l^*, F_l(z) = c phi(z - f)):
 /// unsquared: q <- clamp_c(q + sigma (nbar - f));
 /// squared:   q <- (q + sigma (nbar - f)) / (1 + sigma / c).
-void proxDataDual(PlanarImage& q, const PlanarImage& nbar,
-                  const PlanarImage& f, const float* c_weight, float sigma,
-                  DataPenalty penalty) {
+void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
+                  const float* c_weight, float sigma, DataPenalty penalty) {
   const std::size_t N = q.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
     const float c_w = c_weight[i];
@@ -137,7 +136,8 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& s, int iterations) {
   const std::size_t N = s.n.pixelCount();
   for (int it = 0; it < iterations; ++it) {
-    // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d nbar).
+    // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d
+    // nbar).
     reference::gradient(s.nbar, s.grad_h, s.grad_v);
     reference::proxHuberDual(s.p_h, s.grad_h, level.edge_weight.plane(0),
                              params.sigma, params.huber_eps);
@@ -147,7 +147,7 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
     s.q_sum.fill(0.0f);
     for (int l = 0; l < level.num_inputs; ++l) {
       reference::proxDataDual(s.q[l], s.nbar, level.data[l],
-                              level.data_weight[l].plane(0), params.sigma,
+                              level.data_weight[l].plane(0), params.sigma_data,
                               params.penalty);
       for (int c = 0; c < 3; ++c) {
         for (std::size_t i = 0; i < N; ++i) {

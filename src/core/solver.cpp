@@ -1,6 +1,6 @@
-// The solver's outer loop: input preparation, initialization, the coarse-to-fine
-// pyramid, and the majorize-minimize iteration around the Chambolle-Pock
-// inner solver (kernels_reference.cpp / kernels_fast.cpp).
+// The solver's outer loop: input preparation, initialization, the
+// coarse-to-fine pyramid, and the majorize-minimize iteration around the
+// Chambolle-Pock inner solver (kernels_reference.cpp / kernels_fast.cpp).
 #include "normal_fusion/solver.h"
 
 #include <omp.h>
@@ -29,6 +29,9 @@ std::string sizeText(const PlanarImage& image) {
   s << image.width() << "x" << image.height() << "x" << image.channels();
   return s.str();
 }
+
+/// Iterations per thread per sweep of the fast backend's temporal blocking.
+constexpr int kBlockDepth = 6;
 
 int resolveThreads(int requested) {
   return requested > 0 ? requested : std::max(1, omp_get_num_procs());
@@ -67,17 +70,21 @@ void prepareFinestInto(const FusionProblem& problem,
       for (int l = 0; l < level.num_inputs; ++l) {
         const NormalInput& input = problem.inputs[l];
         const auto& M = input.orientation.M;
-        const float in[3] = {input.normals.plane(0)[i], input.normals.plane(1)[i],
+        const float in[3] = {input.normals.plane(0)[i],
+                             input.normals.plane(1)[i],
                              input.normals.plane(2)[i]};
-        float conf = input.confidence.empty() ? 1.0f : input.confidence.plane(0)[i];
-        conf = std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
+        float conf =
+            input.confidence.empty() ? 1.0f : input.confidence.plane(0)[i];
+        conf =
+            std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
         float out[3] = {0.0f, 0.0f, 0.0f};
         float weight = 0.0f;
         if (isValidNormal(in[0], in[1], in[2]) && std::isfinite(in[0]) &&
             std::isfinite(in[1]) && std::isfinite(in[2])) {
           // Producer's convention to the optical frame: n = M n_in, normalized.
           for (int r = 0; r < 3; ++r) {
-            out[r] = M[3 * r] * in[0] + M[3 * r + 1] * in[1] + M[3 * r + 2] * in[2];
+            out[r] =
+                M[3 * r] * in[0] + M[3 * r + 1] * in[1] + M[3 * r + 2] * in[2];
           }
           const float len =
               std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2]);
@@ -118,9 +125,10 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
 
 namespace {
 
-/// The next coarser level (into reused buffers): 2x2 blocks, validity-weighted means of the data
-/// (normalized), weights averaged and doubled (the data term scales with area,
-/// the smoothness term with length), K scaled, edge weights recomputed.
+/// The next coarser level (into reused buffers): 2x2 blocks, validity-weighted
+/// means of the data (normalized), weights averaged and doubled (the data term
+/// scales with area, the smoothness term with length), K scaled, edge weights
+/// recomputed.
 void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
                     PreparedLevel& coarse, internal::EdgeWeightScratch& scratch,
                     int threads) {
@@ -169,13 +177,15 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
           if (duplicate(k)) continue;
           const float cw = fine.data_weight[l].at(0, ys[k], xs[k]);
           c_sum += cw;
-          for (int c = 0; c < 3; ++c) f_sum[c] += cw * fine.data[l].at(c, ys[k], xs[k]);
+          for (int c = 0; c < 3; ++c)
+            f_sum[c] += cw * fine.data[l].at(c, ys[k], xs[k]);
         }
         const double len = std::sqrt(f_sum[0] * f_sum[0] + f_sum[1] * f_sum[1] +
                                      f_sum[2] * f_sum[2]);
         const bool ok = c_sum > 0.0 && len > 1e-9;
         for (int c = 0; c < 3; ++c) {
-          coarse.data[l].plane(c)[j] = ok ? static_cast<float>(f_sum[c] / len) : 0.0f;
+          coarse.data[l].plane(c)[j] =
+              ok ? static_cast<float>(f_sum[c] / len) : 0.0f;
         }
         coarse.data_weight[l].plane(0)[j] =
             ok ? static_cast<float>(2.0 * c_sum / count) : 0.0f;
@@ -224,21 +234,23 @@ void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
   const double sx = static_cast<double>(coarse.width()) / fine.width;
   const double sy = static_cast<double>(coarse.height()) / fine.height;
   for (int y = 0; y < fine.height; ++y) {
-    const double cy = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0),
-                               coarse.height() - 1.0);
+    const double cy =
+        std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), coarse.height() - 1.0);
     const int y0 = static_cast<int>(cy);
     const int y1 = std::min(y0 + 1, coarse.height() - 1);
     const float ty = static_cast<float>(cy - y0);
     for (int x = 0; x < fine.width; ++x) {
-      const double cx = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0),
-                                 coarse.width() - 1.0);
+      const double cx =
+          std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), coarse.width() - 1.0);
       const int x0 = static_cast<int>(cx);
       const int x1 = std::min(x0 + 1, coarse.width() - 1);
       const float tx = static_cast<float>(cx - x0);
       float v[3];
       for (int c = 0; c < 3; ++c) {
-        v[c] = (1 - ty) * ((1 - tx) * coarse.at(c, y0, x0) + tx * coarse.at(c, y0, x1)) +
-               ty * ((1 - tx) * coarse.at(c, y1, x0) + tx * coarse.at(c, y1, x1));
+        v[c] =
+            (1 - ty) *
+                ((1 - tx) * coarse.at(c, y0, x0) + tx * coarse.at(c, y0, x1)) +
+            ty * ((1 - tx) * coarse.at(c, y1, x0) + tx * coarse.at(c, y1, x1));
       }
       float r[3];
       fine.ray(x, y, r);
@@ -268,7 +280,8 @@ void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
   float* oz = out.plane(2);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (long i = 0; i < N; ++i) {
-    const float inv = 1.0f / std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+    const float inv =
+        1.0f / std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
     ox[i] = nx[i] * inv;
     oy[i] = ny[i] * inv;
     oz[i] = nz[i] * inv;
@@ -302,7 +315,8 @@ double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
           const double d = n[ch] - level.data[l].at(ch, y, x);
           d2 += d * d;
         }
-        row_sum += penalty == DataPenalty::kL2 ? c * std::sqrt(d2) : c * 0.5 * d2;
+        row_sum +=
+            penalty == DataPenalty::kL2 ? c * std::sqrt(d2) : c * 0.5 * d2;
       }
       // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n).
       if (x + 1 < W) {
@@ -342,12 +356,14 @@ void validateProblem(const FusionProblem& problem) {
   const std::size_t total = image.pixelCount() * image.channels();
   for (std::size_t i = 0; i < total; ++i) {
     if (!std::isfinite(image.data()[i])) {
-      throw InputError("image: expected finite intensities, found a non-finite value");
+      throw InputError(
+          "image: expected finite intensities, found a non-finite value");
     }
   }
   problem.K.validate();
   if (problem.inputs.empty()) {
-    throw InputError("inputs: expected at least one normal map (no data terms given)");
+    throw InputError(
+        "inputs: expected at least one normal map (no data terms given)");
   }
   for (std::size_t l = 0; l < problem.inputs.size(); ++l) {
     const NormalInput& in = problem.inputs[l];
@@ -364,12 +380,14 @@ void validateProblem(const FusionProblem& problem) {
     }
     if (!in.confidence.empty() &&
         (in.confidence.channels() != 1 || !in.confidence.sameSize(image))) {
-      throw InputError(name + ": expected a 1-channel confidence of the image's size, got " +
-                       sizeText(in.confidence));
+      throw InputError(
+          name + ": expected a 1-channel confidence of the image's size, got " +
+          sizeText(in.confidence));
     }
     if (!std::isfinite(in.weight) || in.weight < 0.0) {
       std::ostringstream msg;
-      msg << name << ": weight = " << in.weight << ", expected a finite value >= 0";
+      msg << name << ": weight = " << in.weight
+          << ", expected a finite value >= 0";
       throw ParameterError(msg.str());
     }
     in.orientation.validate();
@@ -381,8 +399,9 @@ bool SolverState::compatible(int width, int height, int num_inputs) const {
          normals.channels() == 3 && dual_h.sameSize(normals) &&
          dual_v.sameSize(normals) &&
          static_cast<int>(dual_data.size()) == num_inputs &&
-         std::all_of(dual_data.begin(), dual_data.end(),
-                     [this](const PlanarImage& q) { return q.sameSize(normals); });
+         std::all_of(
+             dual_data.begin(), dual_data.end(),
+             [this](const PlanarImage& q) { return q.sameSize(normals); });
 }
 
 void SolverState::clear() {
@@ -405,18 +424,24 @@ class SolverImpl {
   void solve(const FusionProblem& problem, SolverState& out, bool warm,
              SolveReport& report) {
     const Clock::time_point start = Clock::now();
+    solve_start_ = start;
     has_deadline_ = settings_.time_budget_ms > 0.0;
     deadline_ = start + std::chrono::duration_cast<Clock::duration>(
                             std::chrono::duration<double, std::milli>(
                                 settings_.time_budget_ms));
     threads_ = resolveThreads(settings_.num_threads);
 
-    report.energies.clear();
-    std::vector<double> energies;
+    // Reset the report but keep its vectors' capacity.
+    std::vector<double> energies, energy_seconds;
     energies.swap(report.energies);
+    energy_seconds.swap(report.energy_seconds);
     report = SolveReport();
+    energies.clear();
+    energy_seconds.clear();
     report.energies.swap(energies);
+    report.energy_seconds.swap(energy_seconds);
     report.energies.reserve(settings_.max_outer_iterations + 1);
+    report.energy_seconds.reserve(settings_.max_outer_iterations + 1);
 
     if (levels_.empty()) levels_.resize(1);
     internal::prepareFinestInto(problem, settings_, levels_[0], edge_scratch_,
@@ -441,13 +466,15 @@ class SolverImpl {
       // Coarse-to-fine on a cold start.
       int wanted = settings_.pyramid_levels;
       if (wanted == 0) {
-        const double missing =
-            1.0 - static_cast<double>(finest.valid_pixels) / (static_cast<double>(W) * H);
+        const double missing = 1.0 - static_cast<double>(finest.valid_pixels) /
+                                         (static_cast<double>(W) * H);
         wanted = missing > 0.005 ? 5 : 1;
       }
       while (num_levels < wanted &&
-             std::min(levels_[num_levels - 1].width, levels_[num_levels - 1].height) >= 32) {
-        if (static_cast<int>(levels_.size()) <= num_levels) levels_.emplace_back();
+             std::min(levels_[num_levels - 1].width,
+                      levels_[num_levels - 1].height) >= 32) {
+        if (static_cast<int>(levels_.size()) <= num_levels)
+          levels_.emplace_back();
         downsampleInto(levels_[num_levels - 1], settings_, levels_[num_levels],
                        edge_scratch_, threads_);
         ++num_levels;
@@ -488,7 +515,8 @@ class SolverImpl {
     out.dual_data.resize(L);
     for (int l = 0; l < L; ++l) out.dual_data[l] = s.q[l];
     report.final_energy = report.energies.back();
-    report.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    report.seconds =
+        std::chrono::duration<double>(Clock::now() - start).count();
   }
 
  private:
@@ -498,13 +526,10 @@ class SolverImpl {
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
   Clock::time_point deadline_;
+  Clock::time_point solve_start_;
   bool has_deadline_ = false;
   int threads_ = 1;
   int remaining_inner_ = 0;
-
-  bool pastDeadline() const {
-    return has_deadline_ && Clock::now() >= deadline_;
-  }
 
   void sanitizeWarmNormals(const PreparedLevel& level, PlanarImage& n) {
     for (int y = 0; y < level.height; ++y) {
@@ -536,49 +561,86 @@ class SolverImpl {
     if (settings_.tau > 0.0) {
       if (settings_.tau * settings_.sigma * K_norm2 >= 1.0) {
         std::ostringstream msg;
-        msg << "settings tau = " << settings_.tau << ", sigma = " << settings_.sigma
+        msg << "settings tau = " << settings_.tau
+            << ", sigma = " << settings_.sigma
             << ": expected tau * sigma * (8 + L) < 1, got "
             << settings_.tau * settings_.sigma * K_norm2;
         throw ParameterError(msg.str());
       }
       params.tau = static_cast<float>(settings_.tau);
-      params.sigma = static_cast<float>(settings_.sigma);
+      params.sigma = params.sigma_data = static_cast<float>(settings_.sigma);
+    } else if (settings_.preconditioning) {
+      // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1): tau =
+      // 1 / (column sums of |K|) = 1 / (4 + L), sigma = 1 / (row sums) = 1/2
+      // for the differences and 1 for the data terms.
+      params.tau = static_cast<float>(1.0 / (4.0 + level.num_inputs));
+      params.sigma = 0.5f;
+      params.sigma_data = 1.0f;
     } else {
-      params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(K_norm2));
+      params.tau = params.sigma = params.sigma_data =
+          static_cast<float>(0.99 / std::sqrt(K_norm2));
     }
     params.huber_eps = static_cast<float>(settings_.huber_eps);
     params.penalty = settings_.penalty;
     params.soft_visibility = settings_.visibility == VisibilityMode::kSoft;
     params.num_threads = threads_;
+    params.block_depth = kBlockDepth;
 
     auto energy_of = [&](const PlanarImage& n) {
       return internal::energy(level, settings_.huber_eps, settings_.penalty, n,
                               threads_);
     };
+    auto seconds_since = [](Clock::time_point t) {
+      return std::chrono::duration<double>(Clock::now() - t).count();
+    };
+    const Clock::time_point level_start = Clock::now();
     double best = energy_of(s.n0);
+    // What closing an outer step costs (normalize + energy), for the budget.
+    double finish_seconds = 1.5 * seconds_since(level_start);
     if (finest) {
       report.initial_energy = best;
       report.energies.push_back(best);
+      report.energy_seconds.push_back(seconds_since(solve_start_));
     }
     s.n = s.n0;
     s.nbar = s.n0;
     // Each level may use the whole iteration cap; coarse levels are cheap.
-    int remaining = finest ? remaining_inner_ : settings_.max_total_inner_iterations;
-    const int chunk = has_deadline_ ? 2 : settings_.inner_iterations;
+    int remaining =
+        finest ? remaining_inner_ : settings_.max_total_inner_iterations;
+    // Without a budget, whole outer steps; with one, chunks sized so that the
+    // next chunk and the closing step still fit (2 iterations to measure
+    // first).
+    double seconds_per_iteration = 0.0;
+    const int max_chunk = has_deadline_ ? 2 : settings_.inner_iterations;
     for (int outer = 0; outer < settings_.max_outer_iterations && remaining > 0;
          ++outer) {
       int done = 0;
       const int target = std::min(settings_.inner_iterations, remaining);
       bool out_of_time = false;
       while (done < target) {
-        const int k = std::min(chunk, target - done);
+        int k = std::min(max_chunk, target - done);
+        if (has_deadline_ && seconds_per_iteration > 0.0) {
+          const double left =
+              std::chrono::duration<double>(deadline_ - Clock::now()).count() -
+              finish_seconds;
+          k = std::max(
+              1, std::min(target - done,
+                          static_cast<int>(left / seconds_per_iteration)));
+          k = std::min(k, 4 * threads_ * kBlockDepth);
+        }
+        const Clock::time_point chunk_start = Clock::now();
         if (settings_.backend == SolverBackend::kReference) {
           internal::runInnerReference(level, params, s, k);
         } else {
           internal::runInnerFast(level, params, s, k);
         }
+        seconds_per_iteration = seconds_since(chunk_start) / k;
         done += k;
-        if (pastDeadline()) {
+        if (has_deadline_ &&
+            Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double>(
+                                   seconds_per_iteration + finish_seconds)) >=
+                deadline_) {
           out_of_time = true;
           break;
         }
@@ -591,8 +653,10 @@ class SolverImpl {
         report.coarse_inner_iterations += done;
       }
       // Re-linearize: the normalized iterate replaces n0 when E does not rise.
+      const Clock::time_point finish_start = Clock::now();
       normalizeInto(s.n, candidate_, threads_);
       const double e = energy_of(candidate_);
+      finish_seconds = seconds_since(finish_start);
       bool converged = false;
       if (e <= best) {
         const double decrease = (best - e) / std::max(best, 1e-30);
@@ -600,7 +664,10 @@ class SolverImpl {
         std::swap(s.n0, candidate_);
         s.n = s.n0;
         s.nbar = s.n0;
-        if (finest) report.energies.push_back(e);
+        if (finest) {
+          report.energies.push_back(e);
+          report.energy_seconds.push_back(seconds_since(solve_start_));
+        }
         converged = decrease < settings_.relative_tolerance;
       } else if (finest) {
         report.rejected_outer_steps += 1;
@@ -657,8 +724,10 @@ double computeEnergy(const FusionProblem& problem,
   const PreparedLevel level = internal::prepareFinest(problem, settings);
   if (normals.channels() != 3 || normals.width() != level.width ||
       normals.height() != level.height) {
-    throw InputError("computeEnergy: expected normals of the image's size with "
-                     "3 channels, got " + sizeText(normals));
+    throw InputError(
+        "computeEnergy: expected normals of the image's size with "
+        "3 channels, got " +
+        sizeText(normals));
   }
   return internal::energy(level, settings.huber_eps, settings.penalty, normals,
                           resolveThreads(settings.num_threads));

@@ -42,8 +42,9 @@ void CameraIntrinsics::validate() const {
   const double scale = std::max({std::abs(K[0]), std::abs(K[4]), 1e-300});
   if (!(std::abs(det) > 1e-12 * scale * scale)) {
     std::ostringstream msg;
-    msg << "camera intrinsics: K is singular (fx = " << K[0] << ", fy = " << K[4]
-        << ", det = " << det << "); expected fx, fy != 0 and K[2][2] = 1";
+    msg << "camera intrinsics: K is singular (fx = " << K[0]
+        << ", fy = " << K[4] << ", det = " << det
+        << "); expected fx, fy != 0 and K[2][2] = 1";
     throw InputError(msg.str());
   }
 }
@@ -68,7 +69,8 @@ std::array<double, 9> CameraIntrinsics::inverse() const {
 
 CameraIntrinsics CameraIntrinsics::scaled(double sx, double sy) const {
   CameraIntrinsics out = *this;
-  // u' = sx (u + 0.5) - 0.5 applied to the first row, likewise v' to the second.
+  // u' = sx (u + 0.5) - 0.5 applied to the first row, likewise v' to the
+  // second.
   for (int c = 0; c < 3; ++c) {
     out.K[c] = sx * K[c] + (sx - 1.0) * 0.5 * K[6 + c];
     out.K[3 + c] = sy * K[3 + c] + (sy - 1.0) * 0.5 * K[6 + c];

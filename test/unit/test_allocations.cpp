@@ -4,8 +4,8 @@
 
 #include <atomic>
 #include <cmath>
-#include <functional>
 #include <cstdlib>
+#include <functional>
 #include <new>
 
 #include "normal_fusion/solver.h"
@@ -36,7 +36,8 @@ long allocationsDuring(const std::function<void()>& work) {
 }
 
 TEST(Allocations, NonePerFrameOnceRunning) {
-  for (SolverBackend backend : {SolverBackend::kFast, SolverBackend::kReference}) {
+  for (SolverBackend backend :
+       {SolverBackend::kFast, SolverBackend::kReference}) {
     for (bool with_holes : {false, true}) {
       NormalMap gt;
       FusionProblem problem = test::cylinderScene(96, 64, &gt);
@@ -68,7 +69,8 @@ TEST(Allocations, NonePerFrameOnceRunning) {
           solver.solve(problem, state, !with_holes, report);
         }
       });
-      EXPECT_EQ(count, 0) << "backend " << toString(backend) << ", holes " << with_holes;
+      EXPECT_EQ(count, 0) << "backend " << toString(backend) << ", holes "
+                          << with_holes;
       EXPECT_EQ(report.pyramid_levels > 1, with_holes);
       // The counter works: a cold solve into a fresh state allocates.
       EXPECT_GT(allocationsDuring([&] { solver.solve(problem); }), 0);

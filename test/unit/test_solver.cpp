@@ -29,7 +29,8 @@ float dot3(const NormalMap& n, std::size_t i, const float r[3]) {
 
 void expectUnit(const NormalMap& n) {
   for (std::size_t i = 0; i < n.pixelCount(); ++i) {
-    const float len2 = n.plane(0)[i] * n.plane(0)[i] + n.plane(1)[i] * n.plane(1)[i] +
+    const float len2 = n.plane(0)[i] * n.plane(0)[i] +
+                       n.plane(1)[i] * n.plane(1)[i] +
                        n.plane(2)[i] * n.plane(2)[i];
     ASSERT_NEAR(len2, 1.0f, 1e-4) << "pixel " << i;
   }
@@ -38,28 +39,33 @@ void expectUnit(const NormalMap& n) {
 TEST(Solver, EnergyNeverIncreasesAcrossOuterSteps) {
   for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
     for (VisibilityMode mode : {VisibilityMode::kOff, VisibilityMode::kSoft}) {
-      NormalMap gt;
-      FusionProblem problem = noisyTwoPlanes(48, 32, 0.6, &gt);
-      SolverSettings settings;
-      settings.penalty = penalty;
-      settings.visibility = mode;
-      settings.inner_iterations = 300;  // enough to approach each tangent minimizer
-      settings.max_outer_iterations = 8;
-      settings.max_total_inner_iterations = 100000;
-      settings.relative_tolerance = 0.0;
-      settings.pyramid_levels = 1;
-      Solver solver(settings);
-      SolveReport report;
-      solver.solve(problem, &report);
-      ASSERT_GE(report.energies.size(), 2u);
-      // Every tangent-plane solve, normalized, lowered E: none was rejected.
-      EXPECT_EQ(report.rejected_outer_steps, 0);
-      EXPECT_EQ(report.outer_iterations, 8);
-      for (std::size_t k = 1; k < report.energies.size(); ++k) {
-        EXPECT_LE(report.energies[k], report.energies[k - 1] * (1.0 + 1e-6))
-            << "outer step " << k;
+      for (bool preconditioning : {false, true}) {
+        NormalMap gt;
+        FusionProblem problem = noisyTwoPlanes(48, 32, 0.6, &gt);
+        SolverSettings settings;
+        settings.penalty = penalty;
+        settings.visibility = mode;
+        settings.preconditioning = preconditioning;
+        settings.inner_iterations =
+            300;  // enough to approach each tangent minimizer
+        settings.max_outer_iterations = 8;
+        settings.max_total_inner_iterations = 100000;
+        settings.relative_tolerance = 0.0;
+        settings.pyramid_levels = 1;
+        Solver solver(settings);
+        SolveReport report;
+        solver.solve(problem, &report);
+        ASSERT_GE(report.energies.size(), 2u);
+        // Every tangent-plane solve, normalized, lowered E: none was rejected.
+        EXPECT_EQ(report.rejected_outer_steps, 0);
+        EXPECT_EQ(report.outer_iterations, 8);
+        for (std::size_t k = 1; k < report.energies.size(); ++k) {
+          EXPECT_LE(report.energies[k], report.energies[k - 1] * (1.0 + 1e-6))
+              << "outer step " << k;
+        }
+        EXPECT_LT(report.final_energy, 0.5 * report.initial_energy);
+        EXPECT_EQ(report.energy_seconds.size(), report.energies.size());
       }
-      EXPECT_LT(report.final_energy, 0.5 * report.initial_energy);
     }
   }
 }
@@ -84,7 +90,8 @@ TEST(Solver, SoftVisibilityMakesEveryNormalFaceTheCamera) {
   // Some observations face away: flip a block of them.
   for (int y = 5; y < 15; ++y) {
     for (int x = 5; x < 20; ++x) {
-      for (int c = 0; c < 3; ++c) problem.inputs[0].normals.at(c, y, x) *= -1.0f;
+      for (int c = 0; c < 3; ++c)
+        problem.inputs[0].normals.at(c, y, x) *= -1.0f;
     }
   }
   SolverSettings settings;
@@ -94,10 +101,12 @@ TEST(Solver, SoftVisibilityMakesEveryNormalFaceTheCamera) {
   const auto K_inv = problem.K.inverse();
   for (int y = 0; y < fused.height(); ++y) {
     for (int x = 0; x < fused.width(); ++x) {
-      const float r[3] = {static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]),
-                          static_cast<float>(K_inv[3] * x + K_inv[4] * y + K_inv[5]),
-                          static_cast<float>(K_inv[6] * x + K_inv[7] * y + K_inv[8])};
-      ASSERT_LE(dot3(fused, static_cast<std::size_t>(y) * fused.width() + x, r), 1e-5f)
+      const float r[3] = {
+          static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]),
+          static_cast<float>(K_inv[3] * x + K_inv[4] * y + K_inv[5]),
+          static_cast<float>(K_inv[6] * x + K_inv[7] * y + K_inv[8])};
+      ASSERT_LE(dot3(fused, static_cast<std::size_t>(y) * fused.width() + x, r),
+                1e-5f)
           << "(" << x << ", " << y << ")";
     }
   }
@@ -157,7 +166,8 @@ TEST(Solver, ZeroWeightPixelsAreFilledFromNeighbours) {
   // on the right one.
   for (int y = 10; y < 30; ++y) {
     for (int x = 4; x < 24; ++x) {
-      for (int c = 0; c < 3; ++c) input.normals.at(c, y, x) = y < 20 ? kNaN : 0.0f;
+      for (int c = 0; c < 3; ++c)
+        input.normals.at(c, y, x) = y < 20 ? kNaN : 0.0f;
     }
     for (int x = 40; x < 60; ++x) input.confidence.at(0, y, x) = 0.0f;
   }
@@ -258,7 +268,8 @@ TEST(Solver, OrientationConventionIsAppliedOnInput) {
   FusionProblem problem = test::twoPlaneScene(32, 24, &gt);
   NormalInput flipped;
   flipped.normals = gt;
-  for (std::size_t i = 0; i < gt.pixelCount() * 3; ++i) flipped.normals.data()[i] *= -1;
+  for (std::size_t i = 0; i < gt.pixelCount() * 3; ++i)
+    flipped.normals.data()[i] *= -1;
   flipped.orientation = Orientation::opticalFlipped();
   NormalInput gl;
   gl.normals = gt;
@@ -365,7 +376,8 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
       s.validate();
       ADD_FAILURE() << "expected ParameterError for " << name;
     } catch (const ParameterError& e) {
-      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos)
+          << e.what();
     }
     EXPECT_THROW(Solver{s}, ParameterError);
   };
@@ -419,9 +431,9 @@ TEST(EdgeWeights, FlatImageGivesOneAndEdgesGiveLess) {
     }
   }
   const PlanarImage w = computeEdgeWeights(step, settings);
-  EXPECT_LT(w.at(0, 5, 9), 0.1f);     // across the step
-  EXPECT_GT(w.at(1, 5, 9), 0.99f);    // along it
-  EXPECT_GT(w.at(0, 5, 1), 0.99f);    // far from it
+  EXPECT_LT(w.at(0, 5, 9), 0.1f);   // across the step
+  EXPECT_GT(w.at(1, 5, 9), 0.99f);  // along it
+  EXPECT_GT(w.at(0, 5, 1), 0.99f);  // far from it
   EXPECT_GE(w.at(0, 5, 9), settings.w_min);
   // A step in green alone: the colour gradient sees full contrast, the
   // luminance only 0.587 of it.

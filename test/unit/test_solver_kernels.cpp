@@ -93,14 +93,16 @@ TEST(Kernels, HuberDualProxMatchesItsDefinition) {
       double best_t = 0.0, best = 1e300;
       for (int k = 0; k <= 200000; ++k) {
         const double t = w * k / 200000.0;
-        const double obj = (t - len) * (t - len) / (2.0 * sigma) + eps / (2.0 * w) * t * t;
+        const double obj =
+            (t - len) * (t - len) / (2.0 * sigma) + eps / (2.0 * w) * t * t;
         if (obj < best) {
           best = obj;
           best_t = t;
         }
       }
       for (int c = 0; c < 3; ++c) {
-        EXPECT_NEAR(p.plane(c)[0], best_t * dir[c], 1e-4) << "w=" << w << " len=" << len;
+        EXPECT_NEAR(p.plane(c)[0], best_t * dir[c], 1e-4)
+            << "w=" << w << " len=" << len;
       }
     }
   }
@@ -123,10 +125,12 @@ TEST(Kernels, DataDualProxMatchesClosedForms) {
       for (int c = 0; c < 3; ++c) v[c] = q0[c] + sigma * (nb[c] - f0[c]);
       const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
       for (int c = 0; c < 3; ++c) {
-        // unsquared: projection onto |q| <= c; squared: argmin |q - v|^2/(2 sigma) + |q|^2/(2c).
-        const float expected = penalty == DataPenalty::kL2
-                                   ? (len > c_w ? v[c] * c_w / len : v[c])
-                                   : (c_w > 0 ? v[c] * c_w / (c_w + sigma) : 0.0f);
+        // unsquared: projection onto |q| <= c; squared: argmin |q - v|^2/(2
+        // sigma) + |q|^2/(2c).
+        const float expected =
+            penalty == DataPenalty::kL2
+                ? (len > c_w ? v[c] * c_w / len : v[c])
+                : (c_w > 0 ? v[c] * c_w / (c_w + sigma) : 0.0f);
         EXPECT_NEAR(q.plane(c)[0], expected, 1e-6);
       }
     }
@@ -180,7 +184,8 @@ internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed) {
     PlanarImage f = test::randomImage(W, H, 3, seed + 10 + l);
     PlanarImage c = test::randomImage(W, H, 1, seed + 20 + l);
     for (std::size_t i = 0; i < f.pixelCount(); ++i) {
-      float v[3] = {f.plane(0)[i], f.plane(1)[i], -std::abs(f.plane(2)[i]) - 0.2f};
+      float v[3] = {f.plane(0)[i], f.plane(1)[i],
+                    -std::abs(f.plane(2)[i]) - 0.2f};
       const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
       const bool missing = c.plane(0)[i] < -0.7f;
       for (int k = 0; k < 3; ++k) f.plane(k)[i] = missing ? 0.0f : v[k] / len;
@@ -192,7 +197,8 @@ internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed) {
   return level;
 }
 
-void initState(const internal::PreparedLevel& level, internal::IterationState& s) {
+void initState(const internal::PreparedLevel& level,
+               internal::IterationState& s) {
   s.resize(level.width, level.height, level.num_inputs);
   s.n0 = level.data[0];
   for (std::size_t i = 0; i < s.n0.pixelCount(); ++i) {
@@ -216,7 +222,8 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
   const int L = std::get<0>(GetParam());
   const auto level = randomLevel(37, 23, L, 42 + L);
   internal::InnerParams params;
-  params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(8.0 + L));
+  params.tau = params.sigma = params.sigma_data =
+      static_cast<float>(0.99 / std::sqrt(8.0 + L));
   params.huber_eps = 0.05f;
   params.penalty = std::get<1>(GetParam());
   params.soft_visibility = std::get<2>(GetParam());
@@ -227,18 +234,20 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
   internal::runInnerReference(level, params, ref, 60);
   internal::runInnerFast(level, params, fast, 60);
   double max_diff = 0.0;
-  for (const auto& pair : {std::make_pair(&ref.n, &fast.n),
-                           std::make_pair(&ref.p_h, &fast.p_h),
-                           std::make_pair(&ref.p_v, &fast.p_v),
-                           std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
+  for (const auto& pair :
+       {std::make_pair(&ref.n, &fast.n), std::make_pair(&ref.p_h, &fast.p_h),
+        std::make_pair(&ref.p_v, &fast.p_v),
+        std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
     for (std::size_t i = 0; i < pair.first->pixelCount() * 3; ++i) {
-      max_diff = std::max(max_diff, static_cast<double>(std::abs(
-                                        pair.first->data()[i] - pair.second->data()[i])));
+      max_diff = std::max(
+          max_diff, static_cast<double>(std::abs(pair.first->data()[i] -
+                                                 pair.second->data()[i])));
     }
   }
   EXPECT_LT(max_diff, 1e-4);
   const double e_ref = internal::energy(level, 0.05, params.penalty, ref.n, 1);
-  const double e_fast = internal::energy(level, 0.05, params.penalty, fast.n, 1);
+  const double e_fast =
+      internal::energy(level, 0.05, params.penalty, fast.n, 1);
   EXPECT_NEAR(e_fast, e_ref, 1e-4 * std::abs(e_ref));
 }
 
@@ -248,7 +257,10 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
 TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
   const auto level = randomLevel(29, 17, 2, 7);
   internal::InnerParams params;
-  params.tau = params.sigma = static_cast<float>(0.99 / std::sqrt(10.0));
+  // Diagonal preconditioning steps (different dual steps per term).
+  params.tau = 1.0f / 6.0f;
+  params.sigma = 0.5f;
+  params.sigma_data = 1.0f;
   params.huber_eps = 0.05f;
   params.soft_visibility = true;
   for (int iterations : {1, 5, 13, 40}) {
@@ -264,10 +276,12 @@ TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
         internal::runInnerFast(level, params, fast, iterations);
         double max_diff = 0.0;
         for (std::size_t i = 0; i < fast.n.pixelCount() * 3; ++i) {
-          max_diff = std::max(max_diff, static_cast<double>(std::abs(
-                                            fast.n.data()[i] - ref.n.data()[i])));
-          max_diff = std::max(max_diff, static_cast<double>(std::abs(
-                                            fast.p_v.data()[i] - ref.p_v.data()[i])));
+          max_diff = std::max(
+              max_diff, static_cast<double>(
+                            std::abs(fast.n.data()[i] - ref.n.data()[i])));
+          max_diff = std::max(
+              max_diff, static_cast<double>(
+                            std::abs(fast.p_v.data()[i] - ref.p_v.data()[i])));
         }
         EXPECT_LT(max_diff, 1e-5) << "iterations " << iterations << " threads "
                                   << threads << " depth " << depth;
@@ -279,7 +293,8 @@ TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
 INSTANTIATE_TEST_SUITE_P(
     Backends, FastMatchesReference,
     ::testing::Combine(::testing::Values(1, 2, 3),
-                       ::testing::Values(DataPenalty::kL2, DataPenalty::kSquaredL2),
+                       ::testing::Values(DataPenalty::kL2,
+                                         DataPenalty::kSquaredL2),
                        ::testing::Values(false, true)));
 
 }  // namespace

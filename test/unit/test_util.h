@@ -18,12 +18,15 @@ inline FusionProblem twoPlaneScene(int W, int H, NormalMap* gt) {
   problem.image = ColorImage(W, H, 1);
   gt->resize(W, H, 3);
   const float a = 0.5f;
-  const float left[3] = {a / std::sqrt(1 + a * a), 0.0f, -1.0f / std::sqrt(1 + a * a)};
-  const float right[3] = {-a / std::sqrt(1 + a * a), 0.0f, -1.0f / std::sqrt(1 + a * a)};
+  const float left[3] = {a / std::sqrt(1 + a * a), 0.0f,
+                         -1.0f / std::sqrt(1 + a * a)};
+  const float right[3] = {-a / std::sqrt(1 + a * a), 0.0f,
+                          -1.0f / std::sqrt(1 + a * a)};
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const bool is_left = x < W / 2;
-      for (int c = 0; c < 3; ++c) gt->at(c, y, x) = is_left ? left[c] : right[c];
+      for (int c = 0; c < 3; ++c)
+        gt->at(c, y, x) = is_left ? left[c] : right[c];
       problem.image.at(0, y, x) = is_left ? 0.8f : 0.3f;
     }
   }

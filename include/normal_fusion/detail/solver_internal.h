@@ -20,12 +20,14 @@ struct PreparedLevel {
   int width = 0;
   int height = 0;
   int num_inputs = 0;
-  std::vector<PlanarImage> data;          ///< f_l: 3 planes, unit or 0 where missing
-  std::vector<PlanarImage> data_weight;   ///< c_l = lambda * weight_l * conf * valid: 1 plane
-  PlanarImage edge_weight;                ///< w_h (plane 0), w_v (plane 1)
+  std::vector<PlanarImage> data;  ///< f_l: 3 planes, unit or 0 where missing
+  std::vector<PlanarImage>
+      data_weight;          ///< c_l = lambda * weight_l * conf * valid: 1 plane
+  PlanarImage edge_weight;  ///< w_h (plane 0), w_v (plane 1)
   std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
   CameraIntrinsics K;
-  ColorImage image;  ///< guide at this level (kept to build the next coarser level)
+  ColorImage
+      image;  ///< guide at this level (kept to build the next coarser level)
   int valid_pixels = 0;
 
   /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
@@ -38,8 +40,9 @@ struct PreparedLevel {
 
 /// Step sizes and model constants of one run of inner iterations.
 struct InnerParams {
-  float tau = 0.0f;
-  float sigma = 0.0f;
+  float tau = 0.0f;         ///< primal step
+  float sigma = 0.0f;       ///< dual step of the smoothness terms (p_h, p_v)
+  float sigma_data = 0.0f;  ///< dual step of the data terms (q_l)
   float huber_eps = 0.0f;
   DataPenalty penalty = DataPenalty::kL2;
   bool soft_visibility = false;
@@ -125,11 +128,10 @@ void gradient(const PlanarImage& n, PlanarImage& grad_h, PlanarImage& grad_v);
 void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
                 PlanarImage& div);
 void clampVector(float v[3], float radius);
-void proxHuberDual(PlanarImage& p, const PlanarImage& grad,
-                   const float* weight, float sigma, float eps);
-void proxDataDual(PlanarImage& q, const PlanarImage& nbar,
-                  const PlanarImage& f, const float* c_weight, float sigma,
-                  DataPenalty penalty);
+void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
+                   float sigma, float eps);
+void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
+                  const float* c_weight, float sigma, DataPenalty penalty);
 void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& div, const PlanarImage& q_sum,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
