@@ -1,0 +1,21 @@
+// Rotation-compensated warm start: moving a solver state between frames of a
+// camera that rotated by R, with no depth needed.
+#pragma once
+
+#include <array>
+
+#include "normal_fusion/solver.h"
+
+namespace normal_fusion {
+
+/// Warps a state solved on the previous frame into the current one, for a
+/// camera that rotated by R_cur_prev (row-major; a point in the previous
+/// camera frame X_prev appears at R_cur_prev X_prev in the current one; any
+/// translation is ignored). Pixels move by the homography K R_cur_prev K^-1
+/// and normals (and the duals, which live in the same 3-D coordinates) are
+/// rotated by R_cur_prev. Pixels that come from outside the previous image get
+/// n = -r/|r| and zero duals. Throws InputError on a bad K or a non-rotation R.
+void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
+                         const std::array<double, 9>& R_cur_prev);
+
+}  // namespace normal_fusion
