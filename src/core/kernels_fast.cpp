@@ -332,5 +332,76 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
   }
 }
 
+namespace {
+
+/// Energy terms of one row, summed in float over the row (vectorised); the
+/// rows are then summed in double.
+NF_MULTIVERSION
+float energyRow(int W, const float* __restrict nx, const float* __restrict ny,
+                const float* __restrict nz, const float* __restrict bx,
+                const float* __restrict by, const float* __restrict bz,
+                float below_on, const float* __restrict w_h,
+                const float* __restrict w_v, float eps, float inv_2eps) {
+  float sum = 0.0f;
+  // Smoothness: w_h huber(n(x+1) - n(x)) + w_v huber(n(y+1) - n(y)).
+  for (int x = 0; x < W; ++x) {
+    const int xr = x + 1 < W ? x + 1 : x;
+    const float gx = nx[xr] - nx[x], gy = ny[xr] - ny[x], gz = nz[xr] - nz[x];
+    const float zh = std::sqrt(gx * gx + gy * gy + gz * gz);
+    const float vx = bx[x] - nx[x], vy = by[x] - ny[x], vz = bz[x] - nz[x];
+    const float zv = below_on * std::sqrt(vx * vx + vy * vy + vz * vz);
+    const float hh = zh < eps ? zh * zh * inv_2eps : zh - 0.5f * eps;
+    const float hv = zv < eps ? zv * zv * inv_2eps : zv - 0.5f * eps;
+    sum += w_h[x] * hh + w_v[x] * hv;
+  }
+  return sum;
+}
+
+NF_MULTIVERSION
+float dataEnergyRow(int W, bool squared, const float* __restrict nx,
+                    const float* __restrict ny, const float* __restrict nz,
+                    const float* __restrict fx, const float* __restrict fy,
+                    const float* __restrict fz, const float* __restrict c) {
+  float sum = 0.0f;
+  for (int x = 0; x < W; ++x) {
+    const float dx = nx[x] - fx[x], dy = ny[x] - fy[x], dz = nz[x] - fz[x];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    sum += c[x] * (squared ? 0.5f * d2 : std::sqrt(d2));
+  }
+  return sum;
+}
+
+}  // namespace
+
+double energyFast(const PreparedLevel& level, double huber_eps,
+                  DataPenalty penalty, const PlanarImage& normals,
+                  int num_threads) {
+  const int W = level.width, H = level.height;
+  const float eps = static_cast<float>(huber_eps);
+  const float inv_2eps = eps > 0.0f ? 0.5f / eps : 0.0f;
+  const bool squared = penalty == DataPenalty::kSquaredL2;
+  double total = 0.0;
+#pragma omp parallel for num_threads(num_threads) reduction(+ : total) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    const std::size_t off = static_cast<std::size_t>(y) * W;
+    const std::size_t off_below = y + 1 < H ? off + W : off;
+    double row =
+        energyRow(W, normals.plane(0) + off, normals.plane(1) + off,
+                  normals.plane(2) + off, normals.plane(0) + off_below,
+                  normals.plane(1) + off_below, normals.plane(2) + off_below,
+                  y + 1 < H ? 1.0f : 0.0f, level.edge_weight.plane(0) + off,
+                  level.edge_weight.plane(1) + off, eps, inv_2eps);
+    for (int l = 0; l < level.num_inputs; ++l) {
+      row += dataEnergyRow(
+          W, squared, normals.plane(0) + off, normals.plane(1) + off,
+          normals.plane(2) + off, level.data[l].plane(0) + off,
+          level.data[l].plane(1) + off, level.data[l].plane(2) + off,
+          level.data_weight[l].plane(0) + off);
+    }
+    total += row;
+  }
+  return total;
+}
+
 }  // namespace internal
 }  // namespace normal_fusion

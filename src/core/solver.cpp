@@ -32,6 +32,9 @@ std::string sizeText(const PlanarImage& image) {
 
 /// Iterations per thread per sweep of the fast backend's temporal blocking.
 constexpr int kBlockDepth = 6;
+/// Outer steps and relative tolerance of the coarser pyramid levels.
+constexpr int kCoarseOuterSteps = 4;
+constexpr double kCoarseTolerance = 1e-3;
 
 int resolveThreads(int requested) {
   return requested > 0 ? requested : std::max(1, omp_get_num_procs());
@@ -587,8 +590,11 @@ class SolverImpl {
     params.block_depth = kBlockDepth;
 
     auto energy_of = [&](const PlanarImage& n) {
-      return internal::energy(level, settings_.huber_eps, settings_.penalty, n,
-                              threads_);
+      return settings_.backend == SolverBackend::kReference
+                 ? internal::energy(level, settings_.huber_eps,
+                                    settings_.penalty, n, threads_)
+                 : internal::energyFast(level, settings_.huber_eps,
+                                        settings_.penalty, n, threads_);
     };
     auto seconds_since = [](Clock::time_point t) {
       return std::chrono::duration<double>(Clock::now() - t).count();
@@ -605,8 +611,15 @@ class SolverImpl {
     s.n = s.n0;
     s.nbar = s.n0;
     // Each level may use the whole iteration cap; coarse levels are cheap.
+    // Coarse levels only prepare a start for the next finer one: a few outer
+    // steps each (kCoarseOuterSteps) and a looser tolerance.
     int remaining =
-        finest ? remaining_inner_ : settings_.max_total_inner_iterations;
+        finest ? remaining_inner_
+               : std::min(settings_.max_total_inner_iterations,
+                          kCoarseOuterSteps * settings_.inner_iterations);
+    const double tolerance =
+        finest ? settings_.relative_tolerance
+               : std::max(settings_.relative_tolerance, kCoarseTolerance);
     // Without a budget, whole outer steps; with one, chunks sized so that the
     // next chunk and the closing step still fit (2 iterations to measure
     // first).
@@ -668,7 +681,7 @@ class SolverImpl {
           report.energies.push_back(e);
           report.energy_seconds.push_back(seconds_since(solve_start_));
         }
-        converged = decrease < settings_.relative_tolerance;
+        converged = decrease < tolerance;
       } else if (finest) {
         report.rejected_outer_steps += 1;
       }

@@ -290,6 +290,20 @@ TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
   }
 }
 
+TEST(FastEnergy, MatchesTheReferenceEnergy) {
+  for (int L : {1, 3}) {
+    const auto level = randomLevel(45, 31, L, 3 + L);
+    const PlanarImage n = test::randomImage(45, 31, 3, 77);
+    for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
+      for (double eps : {0.0, 0.05, 0.5}) {
+        const double e_ref = internal::energy(level, eps, penalty, n, 1);
+        const double e_fast = internal::energyFast(level, eps, penalty, n, 2);
+        EXPECT_NEAR(e_fast, e_ref, 1e-5 * e_ref) << "L " << L << " eps " << eps;
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Backends, FastMatchesReference,
     ::testing::Combine(::testing::Values(1, 2, 3),

@@ -158,6 +158,11 @@ void prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads);
 
+/// E(n) of the fast backend: float terms summed per row, rows in double.
+double energyFast(const PreparedLevel& level, double huber_eps,
+                  DataPenalty penalty, const PlanarImage& normals,
+                  int num_threads);
+
 /// E(n) of ALGORITHM.md on a prepared level (double accumulation).
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
               const PlanarImage& normals, int num_threads);

@@ -1,0 +1,141 @@
+// Streaming benchmark: a 640x480 synthetic sequence with slow camera motion and
+// two inputs (paper noise and depth-camera noise), solved frame after frame,
+// warm-started from the previous frame (rotation-compensated) within a
+// per-frame time budget, against a fully converged cold solve of each frame.
+// Prints a table per frame and the worst case. Not a test: timings depend on
+// the machine and its load.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+
+#include "normal_fusion/metrics.h"
+#include "normal_fusion/solver.h"
+#include "normal_fusion/synthetic.h"
+#include "normal_fusion/warp.h"
+
+namespace nf = normal_fusion;
+
+namespace {
+
+std::array<double, 9> relativeRotation(const nf::synthetic::Pose& cur,
+                                       const nf::synthetic::Pose& prev) {
+  std::array<double, 9> R{};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      for (int k = 0; k < 3; ++k) {
+        R[3 * i + j] +=
+            cur.R_cam_world[3 * i + k] * prev.R_cam_world[3 * j + k];
+      }
+    }
+  }
+  return R;
+}
+
+nf::FusionProblem makeProblem(const nf::synthetic::Frame& frame, int index) {
+  nf::FusionProblem problem;
+  problem.image = frame.image;
+  problem.K = frame.K;
+  nf::NormalInput noisy;
+  noisy.normals =
+      nf::synthetic::addPaperNoise(frame.normals_gt, 0.4, 1000 + index);
+  nf::NormalInput depth;
+  depth.normals =
+      nf::synthetic::normalsFromNoisyDepth(frame, 0.0015, 0.02, 2000 + index);
+  problem.inputs = {noisy, depth};
+  return problem;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int frames = 20, width = 640, height = 480, threads = 2, scene = 0;
+  double budget_ms = 33.0, degrees_per_frame = 0.3;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string key = argv[i];
+    const double value = std::atof(argv[i + 1]);
+    if (key == "--frames")
+      frames = static_cast<int>(value);
+    else if (key == "--width")
+      width = static_cast<int>(value);
+    else if (key == "--height")
+      height = static_cast<int>(value);
+    else if (key == "--threads")
+      threads = static_cast<int>(value);
+    else if (key == "--scene")
+      scene = static_cast<int>(value);
+    else if (key == "--budget-ms")
+      budget_ms = value;
+    else if (key == "--degrees-per-frame")
+      degrees_per_frame = value;
+    else {
+      std::fprintf(stderr, "bench_streaming: unknown option %s\n", key.c_str());
+      return 2;
+    }
+  }
+  const auto sequence = nf::synthetic::renderSequence(
+      scene, width, height, frames + 1, degrees_per_frame);
+  nf::SolverSettings live;
+  live.num_threads = threads;
+  live.time_budget_ms = budget_ms;
+  live.max_total_inner_iterations = 100000;
+  nf::SolverSettings converged;
+  converged.num_threads = threads;
+  converged.relative_tolerance = 1e-6;
+  converged.max_total_inner_iterations = 4000;
+  converged.max_outer_iterations = 400;
+  nf::SolverSettings startup = converged;
+
+  std::printf(
+      "# streaming: scene %d, %dx%d, 2 inputs, %.2f deg/frame, budget %.1f ms, "
+      "%d threads\n",
+      scene, width, height, degrees_per_frame, budget_ms, threads);
+  std::printf(
+      "| frame | solve ms | inner its | warm | PSNR live (dB) | PSNR converged "
+      "(dB) | deficit (dB) |\n");
+  std::printf("|---:|---:|---:|:---:|---:|---:|---:|\n");
+  nf::Solver live_solver(live);
+  nf::Solver reference_solver(converged);
+  nf::SolverState state;
+  nf::SolveReport report;
+  double worst_ms = 0.0, worst_deficit = -1e9, sum_ms = 0.0;
+  for (int k = 0; k <= frames; ++k) {
+    const nf::FusionProblem problem = makeProblem(sequence[k], k);
+    if (k == 0) {
+      // Start-up frame: solved to convergence before the stream starts.
+      nf::Solver(startup).solve(problem, state, false, report);
+      continue;
+    }
+    nf::warpStateByRotation(
+        state, problem.K,
+        relativeRotation(sequence[k].pose, sequence[k - 1].pose));
+    const auto start = std::chrono::steady_clock::now();
+    live_solver.solve(problem, state, true, report);
+    const double ms = std::chrono::duration<double, std::milli>(
+                          std::chrono::steady_clock::now() - start)
+                          .count();
+    const double psnr_live = nf::psnr(state.normals, sequence[k].normals_gt);
+    const nf::NormalMap best = reference_solver.solve(problem);
+    const double psnr_best = nf::psnr(best, sequence[k].normals_gt);
+    const double deficit = psnr_best - psnr_live;
+    worst_ms = std::max(worst_ms, ms);
+    worst_deficit = std::max(worst_deficit, deficit);
+    sum_ms += ms;
+    std::printf("| %d | %.1f | %d | %s | %.2f | %.2f | %.3f |\n", k, ms,
+                report.inner_iterations, report.warm_started ? "yes" : "no",
+                psnr_live, psnr_best, deficit);
+    std::fflush(stdout);
+  }
+  const double frame_ms = 1000.0 / 30.0;
+  std::printf(
+      "\nworst solve time %.1f ms (mean %.1f ms; 30 fps allows %.1f ms): %s\n",
+      worst_ms, sum_ms / frames, frame_ms,
+      worst_ms <= frame_ms ? "keeps up" : "does NOT keep up");
+  std::printf(
+      "worst PSNR deficit against the converged cold solve: %.3f dB: %s\n",
+      worst_deficit,
+      worst_deficit <= 0.2 ? "within 0.2 dB" : "NOT within 0.2 dB");
+  return 0;
+}
