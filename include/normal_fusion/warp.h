@@ -14,7 +14,9 @@ namespace normal_fusion {
 /// translation is ignored). Pixels move by the homography K R_cur_prev K^-1
 /// and normals (and the duals, which live in the same 3-D coordinates) are
 /// rotated by R_cur_prev. Pixels that come from outside the previous image get
-/// n = -r/|r| and zero duals. Throws InputError on a bad K or a non-rotation R.
+/// NaN normals (the solver's warm start fills them as a cold start would, from
+/// the current inputs) and zero duals. Throws InputError on a bad K or a
+/// non-rotation R.
 void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                          const std::array<double, 9>& R_cur_prev);
 

@@ -54,7 +54,7 @@ void prepareFinestInto(const FusionProblem& problem,
   level.num_inputs = static_cast<int>(problem.inputs.size());
   level.K = problem.K;
   level.K_inv = problem.K.inverse();
-  level.image = problem.image;
+  level.guide = &problem.image;
   computeEdgeWeightsInto(problem.image, settings.edges, level.edge_weight,
                          scratch, threads);
   level.data.resize(level.num_inputs);
@@ -143,7 +143,9 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
   coarse.K = fine.K.scaled(static_cast<double>(W) / fine.width,
                            static_cast<double>(H) / fine.height);
   coarse.K_inv = coarse.K.inverse();
-  coarse.image.resize(W, H, fine.image.channels());
+  const ColorImage& fine_image = *fine.guide;
+  coarse.image.resize(W, H, fine_image.channels());
+  coarse.guide = &coarse.image;
   coarse.data.resize(L);
   coarse.data_weight.resize(L);
   for (int l = 0; l < L; ++l) {
@@ -165,10 +167,10 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
         return (k == 1 && x1 == x0) || (k == 2 && y1 == y0) ||
                (k == 3 && (x1 == x0 || y1 == y0));
       };
-      for (int c = 0; c < fine.image.channels(); ++c) {
+      for (int c = 0; c < fine_image.channels(); ++c) {
         float sum = 0.0f;
         for (int k = 0; k < 4; ++k) {
-          if (!duplicate(k)) sum += fine.image.at(c, ys[k], xs[k]);
+          if (!duplicate(k)) sum += fine_image.at(c, ys[k], xs[k]);
         }
         coarse.image.plane(c)[j] = sum / count;
       }
@@ -202,27 +204,55 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
                                    coarse.edge_weight, scratch, threads);
 }
 
-/// Cold start: the first input with a usable observation (projected onto the
-/// visible set in soft mode), else -r/|r|.
+/// Cold start of one pixel: the first input with a usable observation
+/// (projected onto the visible set in soft mode), else -r/|r|.
+void coldNormal(const PreparedLevel& level, VisibilityMode mode, int x, int y,
+                float v[3]) {
+  float r[3];
+  level.ray(x, y, r);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    if (level.data_weight[l].at(0, y, x) > 0.0f) {
+      for (int c = 0; c < 3; ++c) v[c] = level.data[l].at(c, y, x);
+      if (mode == VisibilityMode::kSoft) internal::projectVisible(r, v);
+      return;
+    }
+  }
+  const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+  for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+}
+
 void initializeCold(const PreparedLevel& level, VisibilityMode mode,
-                    PlanarImage& n) {
+                    PlanarImage& n, int threads) {
   n.resize(level.width, level.height, 3);
+#pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < level.height; ++y) {
     for (int x = 0; x < level.width; ++x) {
-      float v[3], r[3];
-      level.ray(x, y, r);
-      bool found = false;
-      for (int l = 0; l < level.num_inputs && !found; ++l) {
-        if (level.data_weight[l].at(0, y, x) > 0.0f) {
-          for (int c = 0; c < 3; ++c) v[c] = level.data[l].at(c, y, x);
-          found = true;
+      float v[3];
+      coldNormal(level, mode, x, y, v);
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    }
+  }
+}
+
+/// A warm start's normals made usable: normalized, projected onto the visible
+/// set in soft mode; pixels without one (NaN, zero: e.g. uncovered by a
+/// warp) get the cold start.
+void sanitizeWarmNormals(const PreparedLevel& level, VisibilityMode mode,
+                         PlanarImage& n, int threads) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < level.height; ++y) {
+    for (int x = 0; x < level.width; ++x) {
+      float v[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      if (!(len > 1e-6f) || !std::isfinite(len)) {
+        coldNormal(level, mode, x, y, v);
+      } else {
+        for (float& value : v) value /= len;
+        if (mode == VisibilityMode::kSoft) {
+          float r[3];
+          level.ray(x, y, r);
+          internal::projectVisible(r, v);
         }
-      }
-      if (!found) {
-        const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-        for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
-      } else if (mode == VisibilityMode::kSoft) {
-        internal::projectVisible(r, v);
       }
       for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
     }
@@ -456,6 +486,7 @@ class SolverImpl {
           "inputs: no valid observation in any input (all missing, zero weight "
           "or, in hard visibility mode, facing away from the camera)");
     }
+    stepSizes(L);  // throws on bad explicit steps before the state is touched
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
     report.filled_pixels = W * H - finest.valid_pixels;
@@ -491,17 +522,18 @@ class SolverImpl {
       s.resize(level.width, level.height, level.num_inputs);
       const bool finest_level = li == 0;
       if (finest_level && use_warm) {
-        // Warm start: previous normals (sanitized) and duals.
-        s.n0 = out.normals;
-        sanitizeWarmNormals(level, s.n0);
-        s.p_h = out.dual_h;
-        s.p_v = out.dual_v;
-        for (int l = 0; l < L; ++l) s.q[l] = out.dual_data[l];
+        // Warm start: the previous normals (sanitized) and duals, swapped in
+        // rather than copied (same sizes: no allocation either way).
+        std::swap(s.n0, out.normals);
+        sanitizeWarmNormals(level, settings_.visibility, s.n0, threads_);
+        std::swap(s.p_h, out.dual_h);
+        std::swap(s.p_v, out.dual_v);
+        for (int l = 0; l < L; ++l) std::swap(s.q[l], out.dual_data[l]);
       } else {
         if (li + 1 < num_levels) {
           upsampleNormals(coarse_result_, level, settings_.visibility, s.n0);
         } else {
-          initializeCold(level, settings_.visibility, s.n0);
+          initializeCold(level, settings_.visibility, s.n0, threads_);
         }
         s.p_h.fill(0.0f);
         s.p_v.fill(0.0f);
@@ -511,12 +543,13 @@ class SolverImpl {
       if (!finest_level) coarse_result_ = s.n0;
     }
 
-    // Output: the accepted (unit) normals and the duals for the next frame.
-    out.normals = s.n0;
-    out.dual_h = s.p_h;
-    out.dual_v = s.p_v;
+    // Output: the accepted (unit) normals and the duals for the next frame,
+    // swapped out (the state's old buffers become the next solve's scratch).
+    std::swap(out.normals, s.n0);
+    std::swap(out.dual_h, s.p_h);
+    std::swap(out.dual_v, s.p_v);
     out.dual_data.resize(L);
-    for (int l = 0; l < L; ++l) out.dual_data[l] = s.q[l];
+    for (int l = 0; l < L; ++l) std::swap(out.dual_data[l], s.q[l]);
     report.final_energy = report.energies.back();
     report.seconds =
         std::chrono::duration<double>(Clock::now() - start).count();
@@ -534,33 +567,11 @@ class SolverImpl {
   int threads_ = 1;
   int remaining_inner_ = 0;
 
-  void sanitizeWarmNormals(const PreparedLevel& level, PlanarImage& n) {
-    for (int y = 0; y < level.height; ++y) {
-      for (int x = 0; x < level.width; ++x) {
-        float v[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
-        float r[3];
-        level.ray(x, y, r);
-        const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        if (!(len > 1e-6f) || !std::isfinite(len)) {
-          const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-          for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
-        } else {
-          for (float& value : v) value /= len;
-        }
-        if (settings_.visibility == VisibilityMode::kSoft) {
-          internal::projectVisible(r, v);
-        }
-        for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
-      }
-    }
-  }
-
-  /// Majorize-minimize at one level: inner iterations on the tangent plane at
-  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
-  void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
-                SolveReport& report) {
+  /// Step sizes for L data terms; throws ParameterError when explicit steps
+  /// break tau * sigma * (8 + L) < 1.
+  InnerParams stepSizes(int num_inputs) const {
     InnerParams params;
-    const double K_norm2 = 8.0 + level.num_inputs;
+    const double K_norm2 = 8.0 + num_inputs;
     if (settings_.tau > 0.0) {
       if (settings_.tau * settings_.sigma * K_norm2 >= 1.0) {
         std::ostringstream msg;
@@ -576,13 +587,21 @@ class SolverImpl {
       // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1): tau =
       // 1 / (column sums of |K|) = 1 / (4 + L), sigma = 1 / (row sums) = 1/2
       // for the differences and 1 for the data terms.
-      params.tau = static_cast<float>(1.0 / (4.0 + level.num_inputs));
+      params.tau = static_cast<float>(1.0 / (4.0 + num_inputs));
       params.sigma = 0.5f;
       params.sigma_data = 1.0f;
     } else {
       params.tau = params.sigma = params.sigma_data =
           static_cast<float>(0.99 / std::sqrt(K_norm2));
     }
+    return params;
+  }
+
+  /// Majorize-minimize at one level: inner iterations on the tangent plane at
+  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
+  void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
+                SolveReport& report) {
+    InnerParams params = stepSizes(level.num_inputs);
     params.huber_eps = static_cast<float>(settings_.huber_eps);
     params.penalty = settings_.penalty;
     params.soft_visibility = settings_.visibility == VisibilityMode::kSoft;

@@ -1,6 +1,7 @@
 #include "normal_fusion/warp.h"
 
 #include <cmath>
+#include <limits>
 
 #include "normal_fusion/errors.h"
 
@@ -93,9 +94,8 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       const float len =
           inside ? std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) : 0.0f;
       if (!(len > 1e-6f)) {
-        const double rl = std::sqrt(r_cur[0] * r_cur[0] + r_cur[1] * r_cur[1] +
-                                    r_cur[2] * r_cur[2]);
-        for (int c = 0; c < 3; ++c) n[c] = static_cast<float>(-r_cur[c] / rl);
+        // Uncovered: no prediction (NaN); the solver's warm start fills it.
+        for (float& value : n) value = std::numeric_limits<float>::quiet_NaN();
         inside = false;
       } else {
         for (float& value : n) value /= len;

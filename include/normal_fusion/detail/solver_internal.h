@@ -21,13 +21,16 @@ struct PreparedLevel {
   int height = 0;
   int num_inputs = 0;
   std::vector<PlanarImage> data;  ///< f_l: 3 planes, unit or 0 where missing
-  std::vector<PlanarImage>
-      data_weight;          ///< c_l = lambda * weight_l * conf * valid: 1 plane
+  /// c_l = lambda * weight_l * conf * valid: 1 plane each.
+  std::vector<PlanarImage> data_weight;
   PlanarImage edge_weight;  ///< w_h (plane 0), w_v (plane 1)
   std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
   CameraIntrinsics K;
-  ColorImage
-      image;  ///< guide at this level (kept to build the next coarser level)
+  /// Guide image at this level (read to build the next coarser level): the
+  /// problem's own image at the finest level (not copied; valid during the
+  /// solve), `image` at coarser ones.
+  const ColorImage* guide = nullptr;
+  ColorImage image;
   int valid_pixels = 0;
 
   /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
@@ -148,7 +151,8 @@ void computeEdgeWeightsInto(const ColorImage& image,
                             PlanarImage& weights, EdgeWeightScratch& scratch,
                             int threads);
 
-/// Validates the problem and builds the finest level: f_l in the optical
+/// Validates the problem and builds the finest level (its guide points to the
+/// problem's image, which must outlive it): f_l in the optical
 /// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
 /// (0 where facing away in hard mode), and the edge weights.
 PreparedLevel prepareFinest(const FusionProblem& problem,
