@@ -43,10 +43,12 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
   return {img.plane(0) + offset, img.plane(1) + offset, img.plane(2) + offset};
 }
 
-// Row kernels are compiled for AVX2 and for baseline x86-64; the loader picks
-// one at run time (GCC function multiversioning), so the build stays portable.
+// Row kernels are compiled for AVX-512 (x86-64-v4), AVX2 and baseline x86-64;
+// the loader picks one at run time (GCC function multiversioning), so the
+// build stays portable.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define NF_MULTIVERSION __attribute__((target_clones("avx2", "default")))
+#define NF_MULTIVERSION \
+  __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #else
 #define NF_MULTIVERSION
 #endif
