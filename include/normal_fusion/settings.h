@@ -24,6 +24,12 @@ enum class EdgeColorMode {
   kColorMax,   ///< per direction, the largest gradient magnitude of R, G and B
 };
 
+/// How the image gradient g of the edge weights is measured.
+enum class EdgeGradient {
+  kSobel,              ///< 3x3 Sobel / 8 (centred; the paper's choice)
+  kForwardDifference,  ///< |I(x+1) - I(x)|: exactly between the coupled pixels
+};
+
 /// Shape of the edge-weight function of the gradient magnitude g.
 enum class EdgeWeightFunction {
   kExponential,  ///< exp(-alpha g^beta)
@@ -39,18 +45,23 @@ enum class SolverBackend {
 
 struct EdgeWeightSettings {
   bool enabled = true;           ///< false: w_h = w_v = 1 (plain, unguided TV)
-  double smoothing_sigma = 1.2;  ///< Gaussian pre-smoothing in pixels (0: none)
-  double alpha = 10.0;
+  /// Gaussian pre-smoothing of the guide in pixels (0: none). Raise it to
+  /// 0.5 - 1 for guides with visible sensor noise.
+  double smoothing_sigma = 0.0;
+  double alpha = 50.0;
   double beta = 1.0;
-  double w_min = 0.01;  ///< floor of the weights, in [0, 1]
-  EdgeColorMode color_mode = EdgeColorMode::kLuminance;
+  double w_min = 0.1;  ///< floor of the weights, in [0, 1]
+  EdgeColorMode color_mode = EdgeColorMode::kColorMax;
   EdgeWeightFunction function = EdgeWeightFunction::kExponential;
+  EdgeGradient gradient = EdgeGradient::kForwardDifference;
 };
 
 struct SolverSettings {
   // Model.
-  double lambda = 1.0;      ///< global data weight (the paper's lambda)
-  double huber_eps = 0.05;  ///< Huber threshold; 0 = plain total variation
+  // Defaults: the best set found by `evaluate` on the synthetic scenes (the
+  // paper used lambda = 1, eps = 0.05 with Sobel weights; see README).
+  double lambda = 0.5;     ///< global data weight (the paper's lambda)
+  double huber_eps = 0.0;  ///< Huber threshold; 0 = plain total variation
   DataPenalty penalty = DataPenalty::kL2;
   VisibilityMode visibility = VisibilityMode::kSoft;
   EdgeWeightSettings edges;
@@ -86,17 +97,19 @@ struct SolverSettings {
 };
 
 /// Parses "l2" / "squared_l2", "off" / "hard" / "soft", "luminance" /
-/// "color_max", "exponential" / "rational", "fast" / "reference". Throws
-/// ParameterError.
+/// "color_max", "exponential" / "rational", "sobel" / "forward_difference",
+/// "fast" / "reference". Throws ParameterError.
 DataPenalty parseDataPenalty(const std::string& name);
 VisibilityMode parseVisibilityMode(const std::string& name);
 EdgeColorMode parseEdgeColorMode(const std::string& name);
 EdgeWeightFunction parseEdgeWeightFunction(const std::string& name);
+EdgeGradient parseEdgeGradient(const std::string& name);
 SolverBackend parseSolverBackend(const std::string& name);
 std::string toString(DataPenalty value);
 std::string toString(VisibilityMode value);
 std::string toString(EdgeColorMode value);
 std::string toString(EdgeWeightFunction value);
+std::string toString(EdgeGradient value);
 std::string toString(SolverBackend value);
 
 }  // namespace normal_fusion

@@ -85,6 +85,25 @@ void sobelMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
   }
 }
 
+/// Forward differences |I(x+1) - I(x)|, |I(y+1) - I(y)| (0 on the last
+/// column / row): the edge between exactly the two pixels that the normals'
+/// differences couple; keeps the running maximum.
+void differenceMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
+                            int H, int threads) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    const float* row = img + static_cast<std::size_t>(y) * W;
+    const float* next = img + static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
+    float* out_h = mag_h + static_cast<std::size_t>(y) * W;
+    float* out_v = mag_v + static_cast<std::size_t>(y) * W;
+    for (int x = 0; x < W; ++x) {
+      const int xr = std::min(x + 1, W - 1);
+      out_h[x] = std::max(out_h[x], std::abs(row[xr] - row[x]));
+      out_v[x] = std::max(out_v[x], std::abs(next[x] - row[x]));
+    }
+  }
+}
+
 }  // namespace
 
 namespace internal {
@@ -128,8 +147,13 @@ void computeEdgeWeightsInto(const ColorImage& image,
     }
     gaussianBlur(src, scratch.blurred.data(), W, H, settings.smoothing_sigma,
                  scratch, threads);
-    sobelMagnitudeMax(scratch.blurred.data(), scratch.mag_h.data(),
-                      scratch.mag_v.data(), W, H, threads);
+    if (settings.gradient == EdgeGradient::kSobel) {
+      sobelMagnitudeMax(scratch.blurred.data(), scratch.mag_h.data(),
+                        scratch.mag_v.data(), W, H, threads);
+    } else {
+      differenceMagnitudeMax(scratch.blurred.data(), scratch.mag_h.data(),
+                             scratch.mag_v.data(), W, H, threads);
+    }
   }
 
   const bool exponential =
@@ -144,13 +168,16 @@ void computeEdgeWeightsInto(const ColorImage& image,
   };
   const float* mag_h = scratch.mag_h.data();
   const float* mag_v = scratch.mag_v.data();
-  // The difference n(x+1) - n(x) straddles two pixels: use the stronger edge.
+  // The difference n(x+1) - n(x) straddles two pixels: with Sobel gradients
+  // (centred on pixels) use the stronger of the two; forward differences
+  // already sit between them.
+  const bool centred = settings.gradient == EdgeGradient::kSobel;
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float gh = x + 1 < W ? std::max(mag_h[i], mag_h[i + 1]) : mag_h[i];
-      const float gv = y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
+      const float gh = centred && x + 1 < W ? std::max(mag_h[i], mag_h[i + 1]) : mag_h[i];
+      const float gv = centred && y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
       weights.plane(0)[i] = weight_of(gh);
       weights.plane(1)[i] = weight_of(gv);
     }

@@ -93,6 +93,9 @@ const std::pair<const char*, EdgeColorMode> kColorModes[] = {
 const std::pair<const char*, EdgeWeightFunction> kWeightFunctions[] = {
     {"exponential", EdgeWeightFunction::kExponential},
     {"rational", EdgeWeightFunction::kRational}};
+const std::pair<const char*, EdgeGradient> kGradients[] = {
+    {"sobel", EdgeGradient::kSobel},
+    {"forward_difference", EdgeGradient::kForwardDifference}};
 const std::pair<const char*, SolverBackend> kBackends[] = {
     {"fast", SolverBackend::kFast}, {"reference", SolverBackend::kReference}};
 }  // namespace
@@ -109,6 +112,10 @@ EdgeColorMode parseEdgeColorMode(const std::string& name) {
 EdgeWeightFunction parseEdgeWeightFunction(const std::string& name) {
   return parseEnum("edge weight function", name, kWeightFunctions);
 }
+EdgeGradient parseEdgeGradient(const std::string& name) {
+  return parseEnum("edge gradient", name, kGradients);
+}
+std::string toString(EdgeGradient value) { return enumName(value, kGradients); }
 SolverBackend parseSolverBackend(const std::string& name) {
   return parseEnum("solver backend", name, kBackends);
 }

@@ -417,9 +417,20 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
   EXPECT_EQ(parseDataPenalty("squared_l2"), DataPenalty::kSquaredL2);
 }
 
+/// The paper-style weights: Gaussian pre-smoothing, Sobel, luminance.
+EdgeWeightSettings sobelSettings() {
+  EdgeWeightSettings settings;
+  settings.gradient = EdgeGradient::kSobel;
+  settings.smoothing_sigma = 1.2;
+  settings.alpha = 10.0;
+  settings.w_min = 0.01;
+  settings.color_mode = EdgeColorMode::kLuminance;
+  return settings;
+}
+
 TEST(EdgeWeights, FlatImageGivesOneAndEdgesGiveLess) {
   ColorImage flat(20, 10, 1, 0.5f);
-  EdgeWeightSettings settings;
+  EdgeWeightSettings settings = sobelSettings();
   const PlanarImage w_flat = computeEdgeWeights(flat, settings);
   for (std::size_t i = 0; i < w_flat.pixelCount() * 2; ++i) {
     EXPECT_FLOAT_EQ(w_flat.data()[i], 1.0f);
@@ -448,6 +459,37 @@ TEST(EdgeWeights, FlatImageGivesOneAndEdgesGiveLess) {
   EXPECT_LT(w_max.at(0, 5, 9), 0.5f * w_lum.at(0, 5, 9));
   settings.enabled = false;
   EXPECT_FLOAT_EQ(computeEdgeWeights(step, settings).at(0, 5, 9), 1.0f);
+}
+
+TEST(EdgeWeights, ForwardDifferencesMarkExactlyTheLinkAcrossAnEdge) {
+  ColorImage step(20, 10, 3, 0.2f);
+  for (int y = 0; y < 10; ++y) {
+    for (int x = 10; x < 20; ++x) step.at(1, y, x) = 0.8f;  // green step
+  }
+  EdgeWeightSettings settings;  // defaults: forward differences, colour max
+  ASSERT_EQ(settings.gradient, EdgeGradient::kForwardDifference);
+  const PlanarImage w = computeEdgeWeights(step, settings);
+  // Only the link between columns 9 and 10 is cut (down to the floor).
+  EXPECT_FLOAT_EQ(w.at(0, 5, 9), static_cast<float>(settings.w_min));
+  EXPECT_FLOAT_EQ(w.at(0, 5, 8), 1.0f);
+  EXPECT_FLOAT_EQ(w.at(0, 5, 10), 1.0f);
+  EXPECT_FLOAT_EQ(w.at(1, 5, 9), 1.0f);  // along the edge
+  // A faint step (0.02) keeps most of the weight: exp(-50 * 0.02).
+  ColorImage faint(20, 10, 1, 0.5f);
+  for (int y = 0; y < 10; ++y) {
+    for (int x = 10; x < 20; ++x) faint.at(0, y, x) = 0.52f;
+  }
+  EXPECT_NEAR(computeEdgeWeights(faint, settings).at(0, 5, 9),
+              std::exp(-50.0 * 0.02), 1e-4);
+  // The luminance sees 0.587 of the green step: a higher weight.
+  settings.color_mode = EdgeColorMode::kLuminance;
+  settings.w_min = 0.0;
+  settings.alpha = 5.0;
+  const float w_lum = computeEdgeWeights(step, settings).at(0, 5, 9);
+  settings.color_mode = EdgeColorMode::kColorMax;
+  const float w_max = computeEdgeWeights(step, settings).at(0, 5, 9);
+  EXPECT_NEAR(w_max, std::exp(-5.0 * 0.6), 1e-4);
+  EXPECT_NEAR(w_lum, std::exp(-5.0 * 0.6 * 0.587), 1e-3);
 }
 
 }  // namespace
