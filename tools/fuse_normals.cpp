@@ -104,7 +104,10 @@ void printUsage(std::ostream& out) {
       << nf::toString(d.edges.color_mode) << "]\n"
       << "  --edge-function F     exponential | rational ["
       << nf::toString(d.edges.function) << "]\n"
+      << "  --edge-gradient G     forward_difference | sobel ["
+      << nf::toString(d.edges.gradient) << "]\n"
       << "  --no-edges            unguided TV (all edge weights 1)\n"
+      << "  --preconditioning     diagonal preconditioning of the steps\n"
       << "  --inner-iterations N  Chambolle-Pock iterations per outer step ["
       << d.inner_iterations << "]\n"
       << "  --max-outer N         majorize-minimize steps ["
@@ -189,10 +192,12 @@ Options parseArguments(int argc, char** argv) {
       has_inline_value = true;
     }
     // Flags without a value.
-    if (option == "--help" || option == "--no-edges") {
+    if (option == "--help" || option == "--no-edges" ||
+        option == "--preconditioning") {
       if (has_inline_value) throw UsageError(option + " takes no value");
       if (option == "--help") options.help = true;
       if (option == "--no-edges") s.edges.enabled = false;
+      if (option == "--preconditioning") s.preconditioning = true;
       continue;
     }
     const auto value = [&]() -> std::string {
@@ -251,6 +256,8 @@ Options parseArguments(int argc, char** argv) {
     } else if (option == "--edge-function") {
       s.edges.function =
           parseName(option, value(), nf::parseEdgeWeightFunction);
+    } else if (option == "--edge-gradient") {
+      s.edges.gradient = parseName(option, value(), nf::parseEdgeGradient);
     } else if (option == "--inner-iterations") {
       s.inner_iterations = parseInt(option, value());
     } else if (option == "--max-outer") {
