@@ -11,6 +11,8 @@
 #include <cstring>
 #include <string>
 
+#include <sys/resource.h>
+
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/synthetic.h"
@@ -137,5 +139,11 @@ int main(int argc, char** argv) {
       "worst PSNR deficit against the converged cold solve: %.3f dB: %s\n",
       worst_deficit,
       worst_deficit <= 0.2 ? "within 0.2 dB" : "NOT within 0.2 dB");
+  // Peak resident memory of the whole process (the renders of the sequence,
+  // both solvers and their states included).
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  std::printf("peak resident memory of this process: %.1f MiB\n",
+              usage.ru_maxrss / 1024.0);
   return 0;
 }
