@@ -64,6 +64,19 @@ void huberDualRow(int n, float sigma, float sigma_eps,
                   const float* __restrict next_y,
                   const float* __restrict next_z, float* __restrict px,
                   float* __restrict py, float* __restrict pz) {
+  if (sigma_eps == 0.0f) {
+    // Plain TV (eps = 0): the shrink factor is 1 (and w = 0 clamps to 0).
+    for (int x = 0; x < n; ++x) {
+      const float ax = px[x] + sigma * (next_x[x] - here_x[x]);
+      const float ay = py[x] + sigma * (next_y[x] - here_y[x]);
+      const float az = pz[x] + sigma * (next_z[x] - here_z[x]);
+      const float sc = clampScale(ax * ax + ay * ay + az * az, w[x]);
+      px[x] = ax * sc;
+      py[x] = ay * sc;
+      pz[x] = az * sc;
+    }
+    return;
+  }
   for (int x = 0; x < n; ++x) {
     const float shrink = w[x] / (w[x] + sigma_eps + kTiny);
     const float ax = (px[x] + sigma * (next_x[x] - here_x[x])) * shrink;
