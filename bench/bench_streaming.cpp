@@ -22,20 +22,6 @@ namespace nf = normal_fusion;
 
 namespace {
 
-std::array<double, 9> relativeRotation(const nf::synthetic::Pose& cur,
-                                       const nf::synthetic::Pose& prev) {
-  std::array<double, 9> R{};
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      for (int k = 0; k < 3; ++k) {
-        R[3 * i + j] +=
-            cur.R_cam_world[3 * i + k] * prev.R_cam_world[3 * j + k];
-      }
-    }
-  }
-  return R;
-}
-
 nf::FusionProblem makeProblem(const nf::synthetic::Frame& frame, int index) {
   nf::FusionProblem problem;
   problem.image = frame.image;
@@ -110,9 +96,9 @@ int main(int argc, char** argv) {
       nf::Solver(startup).solve(problem, state, false, report);
       continue;
     }
-    nf::warpStateByRotation(
-        state, problem.K,
-        relativeRotation(sequence[k].pose, sequence[k - 1].pose));
+    nf::warpStateByRotation(state, problem.K,
+                            nf::synthetic::relativeRotation(
+                                sequence[k].pose, sequence[k - 1].pose));
     const auto start = std::chrono::steady_clock::now();
     live_solver.solve(problem, state, true, report);
     const double ms = std::chrono::duration<double, std::milli>(

@@ -20,6 +20,10 @@ struct Pose {
   std::array<double, 3> t_cam_world{{0, 0, 0}};
 };
 
+/// Rotation of the camera from `prev` to `cur`: R_cur_prev = R_cur_world
+/// R_prev_world^T (the argument warpStateByRotation takes).
+std::array<double, 9> relativeRotation(const Pose& cur, const Pose& prev);
+
 /// One rendered view.
 struct Frame {
   ColorImage image;      ///< 3 planes R, G, B in [0, 1], textured and shaded

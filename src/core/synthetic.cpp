@@ -843,5 +843,18 @@ NormalMap sparseAccurate(const NormalMap& normals_gt, double density,
   return out;
 }
 
+std::array<double, 9> relativeRotation(const Pose& cur, const Pose& prev) {
+  std::array<double, 9> R{};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      for (int k = 0; k < 3; ++k) {
+        R[3 * i + j] +=
+            cur.R_cam_world[3 * i + k] * prev.R_cam_world[3 * j + k];
+      }
+    }
+  }
+  return R;
+}
+
 }  // namespace synthetic
 }  // namespace normal_fusion

@@ -11,21 +11,6 @@
 namespace normal_fusion {
 namespace {
 
-std::array<double, 9> relativeRotation(const synthetic::Pose& cur,
-                                       const synthetic::Pose& prev) {
-  // R_cur_prev = R_cur_world R_prev_world^T.
-  std::array<double, 9> R{};
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      for (int k = 0; k < 3; ++k) {
-        R[3 * i + j] +=
-            cur.R_cam_world[3 * i + k] * prev.R_cam_world[3 * j + k];
-      }
-    }
-  }
-  return R;
-}
-
 /// Share of pixels whose normals agree within `degrees`.
 double shareWithin(const NormalMap& a, const NormalMap& b, double degrees) {
   const double cos_limit = std::cos(degrees * M_PI / 180.0);
@@ -50,7 +35,8 @@ TEST(Warp, RotationWarpPredictsTheNextFrame) {
   state.dual_v = PlanarImage(160, 120, 3, 0.0f);
   state.dual_data.assign(1, PlanarImage(160, 120, 3, 0.0f));
   const double unwarped = shareWithin(prev.normals_gt, cur.normals_gt, 3.0);
-  warpStateByRotation(state, cur.K, relativeRotation(cur.pose, prev.pose));
+  warpStateByRotation(state, cur.K,
+                      synthetic::relativeRotation(cur.pose, prev.pose));
   const double warped = shareWithin(state.normals, cur.normals_gt, 3.0);
   EXPECT_GT(warped, 0.85);
   EXPECT_GT(warped, unwarped + 0.2);
