@@ -86,7 +86,7 @@ struct SolverSettings {
   /// Automatic steps: diagonal preconditioning (tau = 1 / (4 + L), sigma =
   /// 1/2 for the differences and 1 for the data terms) when true, else the
   /// scalar steps tau = sigma = 0.99 / sqrt(8 + L).
-  bool preconditioning = false;
+  bool preconditioning = true;
   /// Explicit step sizes (override the automatic ones); 0 = automatic. When
   /// set, tau * sigma * (8 + L) must be below 1.
   double tau = 0.0;
