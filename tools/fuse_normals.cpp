@@ -24,6 +24,7 @@
 #include "normal_fusion/io.h"
 #include "normal_fusion/settings.h"
 #include "normal_fusion/solver.h"
+#include "normal_fusion/solver_options.h"
 #include "normal_fusion/types.h"
 
 namespace {
@@ -83,79 +84,21 @@ void printUsage(std::ostream& out) {
          "  --orientation O       optical | optical_flipped | opengl | nine\n"
          "                        numbers of a signed permutation (row-major)\n"
          "\n"
-         "Solver options (defaults in brackets):\n"
-         "  --lambda X            data weight ["
-      << d.lambda << "]\n"
-      << "  --eps X               Huber threshold, 0 = plain TV ["
-      << d.huber_eps << "]\n"
-      << "  --penalty P           l2 | squared_l2 [" << nf::toString(d.penalty)
-      << "]\n"
-      << "  --visibility V        off | hard | soft ["
-      << nf::toString(d.visibility) << "]\n"
-      << "  --edge-alpha X        edge weight exp(-alpha g^beta) or\n"
-      << "                        1 / (1 + alpha g^beta) of the image\n"
-      << "                        gradient g [" << d.edges.alpha << "]\n"
-      << "  --edge-beta X         exponent beta [" << d.edges.beta << "]\n"
-      << "  --edge-wmin X         floor of the edge weights [" << d.edges.w_min
-      << "]\n"
-      << "  --edge-sigma X        Gaussian pre-smoothing in pixels ["
-      << d.edges.smoothing_sigma << "]\n"
-      << "  --edge-color C        luminance | color_max ["
-      << nf::toString(d.edges.color_mode) << "]\n"
-      << "  --edge-function F     exponential | rational ["
-      << nf::toString(d.edges.function) << "]\n"
-      << "  --edge-gradient G     forward_difference | sobel ["
-      << nf::toString(d.edges.gradient) << "]\n"
-      << "  --no-edges            unguided TV (all edge weights 1)\n"
-      << "  --preconditioning     diagonal preconditioning of the steps\n"
-      << "  --inner-iterations N  Chambolle-Pock iterations per outer step ["
-      << d.inner_iterations << "]\n"
-      << "  --max-outer N         majorize-minimize steps ["
-      << d.max_outer_iterations << "]\n"
-      << "  --max-iterations N    inner iterations in all ["
-      << d.max_total_inner_iterations << "]\n"
-      << "  --tolerance X         relative energy decrease to stop ["
-      << d.relative_tolerance << "]\n"
-      << "  --time-budget-ms X    wall-clock budget, 0 = none ["
-      << d.time_budget_ms << "]\n"
-      << "  --pyramid-levels N    1 = off, 0 = automatic [" << d.pyramid_levels
-      << "]\n"
-      << "  --threads N           0 = all hardware threads [" << d.num_threads
-      << "]\n"
-      << "  --backend B           fast | reference [" << nf::toString(d.backend)
-      << "]\n"
+         "Solver options (defaults in brackets):\n";
+  nf::cli::printSolverOptions(out, d);
+  out << "  --no-edges            same as --edges off\n"
       << "  --help                this text\n"
       << "\n"
       << "Exit codes: 0 success, 1 unusable input, 2 usage error.\n";
 }
 
+/// Strict number parsing, as a usage error.
 double parseDouble(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  double value = 0.0;
   try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
+    return nf::cli::parseDouble(option, text);
+  } catch (const nf::ParameterError& e) {
+    throw UsageError(e.what());
   }
-  if (used == 0 || used != text.size() || !std::isfinite(value)) {
-    throw UsageError(option + ": expected a finite number, got '" + text + "'");
-  }
-  return value;
-}
-
-int parseInt(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  long value = 0;
-  try {
-    value = std::stol(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size() || value < -2147483647L ||
-      value > 2147483647L) {
-    throw UsageError(option + ": expected an integer, got '" + text + "'");
-  }
-  return static_cast<int>(value);
 }
 
 /// Runs a parser of settings.h, turning its ParameterError into a usage error.
@@ -192,12 +135,10 @@ Options parseArguments(int argc, char** argv) {
       has_inline_value = true;
     }
     // Flags without a value.
-    if (option == "--help" || option == "--no-edges" ||
-        option == "--preconditioning") {
+    if (option == "--help" || option == "--no-edges") {
       if (has_inline_value) throw UsageError(option + " takes no value");
       if (option == "--help") options.help = true;
       if (option == "--no-edges") s.edges.enabled = false;
-      if (option == "--preconditioning") s.preconditioning = true;
       continue;
     }
     const auto value = [&]() -> std::string {
@@ -235,45 +176,12 @@ Options parseArguments(int argc, char** argv) {
       input.orientation_name = value();
       input.orientation = parseName(option, input.orientation_name,
                                     nf::Orientation::fromString);
-    } else if (option == "--lambda") {
-      s.lambda = parseDouble(option, value());
-    } else if (option == "--eps") {
-      s.huber_eps = parseDouble(option, value());
-    } else if (option == "--penalty") {
-      s.penalty = parseName(option, value(), nf::parseDataPenalty);
-    } else if (option == "--visibility") {
-      s.visibility = parseName(option, value(), nf::parseVisibilityMode);
-    } else if (option == "--edge-alpha") {
-      s.edges.alpha = parseDouble(option, value());
-    } else if (option == "--edge-beta") {
-      s.edges.beta = parseDouble(option, value());
-    } else if (option == "--edge-wmin") {
-      s.edges.w_min = parseDouble(option, value());
-    } else if (option == "--edge-sigma") {
-      s.edges.smoothing_sigma = parseDouble(option, value());
-    } else if (option == "--edge-color") {
-      s.edges.color_mode = parseName(option, value(), nf::parseEdgeColorMode);
-    } else if (option == "--edge-function") {
-      s.edges.function =
-          parseName(option, value(), nf::parseEdgeWeightFunction);
-    } else if (option == "--edge-gradient") {
-      s.edges.gradient = parseName(option, value(), nf::parseEdgeGradient);
-    } else if (option == "--inner-iterations") {
-      s.inner_iterations = parseInt(option, value());
-    } else if (option == "--max-outer") {
-      s.max_outer_iterations = parseInt(option, value());
-    } else if (option == "--max-iterations") {
-      s.max_total_inner_iterations = parseInt(option, value());
-    } else if (option == "--tolerance") {
-      s.relative_tolerance = parseDouble(option, value());
-    } else if (option == "--time-budget-ms") {
-      s.time_budget_ms = parseDouble(option, value());
-    } else if (option == "--pyramid-levels") {
-      s.pyramid_levels = parseInt(option, value());
-    } else if (option == "--threads") {
-      s.num_threads = parseInt(option, value());
-    } else if (option == "--backend") {
-      s.backend = parseName(option, value(), nf::parseSolverBackend);
+    } else if (nf::cli::isSolverOption(option)) {
+      try {
+        nf::cli::applySolverOption(option, value(), s);
+      } catch (const nf::ParameterError& e) {
+        throw UsageError(e.what());
+      }
     } else {
       throw UsageError("unknown option '" + option + "' (see --help)");
     }
