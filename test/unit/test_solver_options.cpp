@@ -1,0 +1,94 @@
+// The tools' shared solver options: every option reaches its setting, bad
+// values are refused with the option's name.
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/solver_options.h"
+
+namespace normal_fusion {
+namespace {
+
+TEST(SolverOptions, EachOptionSetsItsField) {
+  SolverSettings s;
+  cli::applySolverOption("--lambda", "2.5", s);
+  cli::applySolverOption("--eps", "0.01", s);
+  cli::applySolverOption("--penalty", "squared_l2", s);
+  cli::applySolverOption("--visibility", "hard", s);
+  cli::applySolverOption("--edges", "off", s);
+  cli::applySolverOption("--edge-gradient", "sobel", s);
+  cli::applySolverOption("--edge-color", "luminance", s);
+  cli::applySolverOption("--edge-function", "rational", s);
+  cli::applySolverOption("--edge-alpha", "7", s);
+  cli::applySolverOption("--edge-beta", "2", s);
+  cli::applySolverOption("--edge-wmin", "0.2", s);
+  cli::applySolverOption("--edge-sigma", "0.8", s);
+  cli::applySolverOption("--inner-iterations", "30", s);
+  cli::applySolverOption("--max-outer", "9", s);
+  cli::applySolverOption("--max-iterations", "333", s);
+  cli::applySolverOption("--tolerance", "1e-5", s);
+  cli::applySolverOption("--time-budget-ms", "33", s);
+  cli::applySolverOption("--pyramid-levels", "3", s);
+  cli::applySolverOption("--preconditioning", "off", s);
+  cli::applySolverOption("--threads", "1", s);
+  cli::applySolverOption("--backend", "reference", s);
+  cli::applySolverOption("--tau", "0.1", s);
+  cli::applySolverOption("--sigma", "0.2", s);
+  EXPECT_EQ(s.lambda, 2.5);
+  EXPECT_EQ(s.huber_eps, 0.01);
+  EXPECT_EQ(s.penalty, DataPenalty::kSquaredL2);
+  EXPECT_EQ(s.visibility, VisibilityMode::kHard);
+  EXPECT_FALSE(s.edges.enabled);
+  EXPECT_EQ(s.edges.gradient, EdgeGradient::kSobel);
+  EXPECT_EQ(s.edges.color_mode, EdgeColorMode::kLuminance);
+  EXPECT_EQ(s.edges.function, EdgeWeightFunction::kRational);
+  EXPECT_EQ(s.edges.alpha, 7.0);
+  EXPECT_EQ(s.edges.beta, 2.0);
+  EXPECT_EQ(s.edges.w_min, 0.2);
+  EXPECT_EQ(s.edges.smoothing_sigma, 0.8);
+  EXPECT_EQ(s.inner_iterations, 30);
+  EXPECT_EQ(s.max_outer_iterations, 9);
+  EXPECT_EQ(s.max_total_inner_iterations, 333);
+  EXPECT_EQ(s.relative_tolerance, 1e-5);
+  EXPECT_EQ(s.time_budget_ms, 33.0);
+  EXPECT_EQ(s.pyramid_levels, 3);
+  EXPECT_FALSE(s.preconditioning);
+  EXPECT_EQ(s.num_threads, 1);
+  EXPECT_EQ(s.backend, SolverBackend::kReference);
+  EXPECT_EQ(s.tau, 0.1);
+  EXPECT_EQ(s.sigma, 0.2);
+  // The help text names every option with its default.
+  std::ostringstream help;
+  cli::printSolverOptions(help, SolverSettings());
+  for (const char* name :
+       {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
+        "--backend", "--max-iterations"}) {
+    EXPECT_TRUE(cli::isSolverOption(name)) << name;
+    EXPECT_NE(help.str().find(name), std::string::npos) << name;
+  }
+}
+
+TEST(SolverOptions, BadValuesNameTheOption) {
+  SolverSettings s;
+  auto expect_refused = [&](const char* option, const char* value) {
+    try {
+      cli::applySolverOption(option, value, s);
+      ADD_FAILURE() << option << " " << value << " was accepted";
+    } catch (const ParameterError& e) {
+      EXPECT_NE(std::string(e.what()).find(option), std::string::npos)
+          << e.what();
+    }
+  };
+  expect_refused("--lambda", "abc");
+  expect_refused("--lambda", "1.5x");
+  expect_refused("--lambda", "nan");
+  expect_refused("--inner-iterations", "2.5");
+  expect_refused("--visibility", "sometimes");
+  expect_refused("--preconditioning", "maybe");
+  EXPECT_FALSE(cli::isSolverOption("--output"));
+  EXPECT_THROW(cli::applySolverOption("--output", "x", s), ParameterError);
+}
+
+}  // namespace
+}  // namespace normal_fusion
