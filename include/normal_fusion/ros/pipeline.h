@@ -1,0 +1,112 @@
+// One synchronized set of messages in, the fused map and its statistics out:
+// the part of the node that the nodelet and fuse_bag share. Holds the solver,
+// its warm-start state and the reused buffers; no subscriptions, no threads.
+#pragma once
+
+#include <normal_fusion/FusionStats.h>
+#include <ros/time.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <tf2/buffer_core.h>
+
+#include <array>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "normal_fusion/ros/parameters.h"
+#include "normal_fusion/solver.h"
+
+namespace normal_fusion {
+namespace node {
+
+/// Names of the input topics, for error messages (resolved names).
+struct TopicNames {
+  std::string image = "image";
+  std::string camera_info = "camera_info";
+  std::vector<std::string> normals;     ///< normals_0 .. normals_{N-1}
+  std::vector<std::string> confidence;  ///< confidence_0 .. confidence_{N-1}
+
+  /// The default relative names for `num_inputs` inputs.
+  static TopicNames defaults(int num_inputs);
+};
+
+/// One synchronized set. `normals` has one entry per input (null = an optional
+/// input that is absent from this set); `confidence` likewise (null = not
+/// used or absent).
+struct InputSet {
+  sensor_msgs::ImageConstPtr image;
+  sensor_msgs::CameraInfoConstPtr camera_info;
+  std::vector<sensor_msgs::ImageConstPtr> normals;
+  std::vector<sensor_msgs::ImageConstPtr> confidence;
+};
+
+/// Looks up the rotation R_cur_prev of the camera frame `frame` between the
+/// stamps `previous` and `current` (X_cur = R_cur_prev X_prev, row-major).
+/// Returns false with a reason when it is not known.
+using RotationLookup =
+    std::function<bool(const std::string& frame, const ros::Time& previous,
+                       const ros::Time& current,
+                       std::array<double, 9>* R_cur_prev, std::string* reason)>;
+
+/// A lookup in a tf2 buffer: the transform of `frame` at `previous` into
+/// `frame` at `current` through `fixed_frame`, its rotation part. The buffer
+/// must outlive the returned function.
+RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
+                                        const std::string& fixed_frame);
+
+/// What one processed set gives.
+struct PipelineOutput {
+  sensor_msgs::ImagePtr fused;      ///< 32FC3, the image's header
+  sensor_msgs::ImagePtr fused_vis;  ///< rgb8; null unless requested
+  normal_fusion::FusionStatsPtr stats;
+  /// Something the caller should log (e.g. the rotation lookup failed and the
+  /// frame was cold-started); empty when all went as asked.
+  std::string warning;
+};
+
+class FusionPipeline {
+ public:
+  FusionPipeline(const NodeSettings& settings, const TopicNames& topics);
+
+  /// New settings (already corrected by settingsFromParameters); take effect
+  /// on the next set. The input count must stay the same.
+  void setSettings(const NodeSettings& settings);
+  const NodeSettings& settings() const { return settings_; }
+
+  /// Converts, checks, solves (warm-started when allowed) and encodes one
+  /// set. Throws InputError naming the topic and the problem, or
+  /// ParameterError; the warm-start state is then dropped. `rotation` may be
+  /// empty (no rotation compensation).
+  void process(const InputSet& set, const RotationLookup& rotation,
+               bool make_vis, PipelineOutput* output);
+
+  /// Forgets the previous frame: the next set cold-starts.
+  void resetWarmStart();
+
+  std::uint64_t framesProcessed() const { return frames_processed_; }
+  const SolveReport& lastReport() const { return report_; }
+  /// The fused normals of the last set (valid after process()).
+  const NormalMap& fusedNormals() const { return state_.normals; }
+
+ private:
+  /// Whether the previous result can warm-start this frame, and why not.
+  bool canWarmStart(const CameraIntrinsics& K, const ros::Time& stamp,
+                    std::string* reason) const;
+
+  NodeSettings settings_;
+  TopicNames topics_;
+  Solver solver_;
+  FusionProblem problem_;
+  SolverState state_;
+  SolveReport report_;
+  std::vector<NormalMap> raw_normals_;     ///< per input, as received
+  std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
+  bool has_previous_ = false;
+  ros::Time previous_stamp_;
+  CameraIntrinsics previous_K_;
+  std::uint64_t frames_processed_ = 0;
+};
+
+}  // namespace node
+}  // namespace normal_fusion

@@ -1,0 +1,419 @@
+#include "normal_fusion/ros/conversions.h"
+
+#include <cv_bridge/cv_bridge.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+#include "normal_fusion/errors.h"
+
+namespace normal_fusion {
+namespace node {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+/// What an encoding holds: channel count, bytes per channel, float or not, and
+/// where R, G, B sit (for 3- and 4-channel encodings).
+struct EncodingInfo {
+  int channels = 0;
+  int bytes_per_channel = 0;
+  bool is_float = false;
+  int r = 0, g = 1, b = 2;
+};
+
+bool lookupEncoding(const std::string& encoding, EncodingInfo* info) {
+  struct Entry {
+    const char* name;
+    EncodingInfo info;
+  };
+  static const Entry kEntries[] = {
+      {"rgb8", {3, 1, false, 0, 1, 2}},   {"bgr8", {3, 1, false, 2, 1, 0}},
+      {"rgba8", {4, 1, false, 0, 1, 2}},  {"bgra8", {4, 1, false, 2, 1, 0}},
+      {"rgb16", {3, 2, false, 0, 1, 2}},  {"bgr16", {3, 2, false, 2, 1, 0}},
+      {"rgba16", {4, 2, false, 0, 1, 2}}, {"bgra16", {4, 2, false, 2, 1, 0}},
+      {"mono8", {1, 1, false, 0, 0, 0}},  {"8UC1", {1, 1, false, 0, 0, 0}},
+      {"mono16", {1, 2, false, 0, 0, 0}}, {"16UC1", {1, 2, false, 0, 0, 0}},
+      {"8UC3", {3, 1, false, 0, 1, 2}},   {"32FC3", {3, 4, true, 0, 1, 2}},
+      {"32FC1", {1, 4, true, 0, 0, 0}},
+  };
+  for (const Entry& entry : kEntries) {
+    if (encoding == entry.name) {
+      *info = entry.info;
+      return true;
+    }
+  }
+  return false;
+}
+
+std::string sizeText(int width, int height) {
+  return std::to_string(width) + "x" + std::to_string(height);
+}
+
+/// A checked view of the message as a cv::Mat (no copy).
+cv::Mat viewOf(const sensor_msgs::Image& msg, const std::string& topic) {
+  checkImageLayout(msg, topic);
+  try {
+    return cv_bridge::toCvShare(msg, nullptr)->image;
+  } catch (const cv_bridge::Exception& e) {
+    throw InputError(topic + ": cannot read encoding '" + msg.encoding +
+                     "': " + e.what());
+  }
+}
+
+void requireEncoding(const sensor_msgs::Image& msg, const std::string& topic,
+                     std::initializer_list<const char*> accepted) {
+  for (const char* name : accepted) {
+    if (msg.encoding == name) return;
+  }
+  std::string list;
+  for (const char* name : accepted) list += std::string(" ") + name;
+  throw InputError(topic + ": unsupported encoding '" + msg.encoding +
+                   "'; expected one of" + list);
+}
+
+}  // namespace
+
+void checkImageLayout(const sensor_msgs::Image& msg, const std::string& topic) {
+  EncodingInfo info;
+  if (!lookupEncoding(msg.encoding, &info)) {
+    throw InputError(topic + ": unsupported encoding '" + msg.encoding + "'");
+  }
+  if (msg.width == 0 || msg.height == 0) {
+    throw InputError(topic + ": expected a non-empty image, got " +
+                     sizeText(msg.width, msg.height));
+  }
+  const std::size_t row_bytes = static_cast<std::size_t>(msg.width) *
+                                info.channels * info.bytes_per_channel;
+  if (msg.step < row_bytes) {
+    std::ostringstream text;
+    text << topic << ": step " << msg.step << " is shorter than a row of "
+         << msg.width << " " << msg.encoding << " pixels (" << row_bytes
+         << " bytes)";
+    throw InputError(text.str());
+  }
+  if (static_cast<std::size_t>(msg.height) * msg.step != msg.data.size()) {
+    std::ostringstream text;
+    text << topic << ": expected height * step = " << msg.height << " * "
+         << msg.step << " = " << static_cast<std::size_t>(msg.height) * msg.step
+         << " bytes of data, got " << msg.data.size();
+    throw InputError(text.str());
+  }
+  if (msg.is_bigendian && info.bytes_per_channel > 1) {
+    throw InputError(topic + ": big-endian " + msg.encoding +
+                     " data is not supported; expected little-endian");
+  }
+}
+
+void imageFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
+                      ColorImage& image) {
+  requireEncoding(msg, topic,
+                  {"rgb8", "bgr8", "rgba8", "bgra8", "mono8", "mono16", "8UC1",
+                   "16UC1", "rgb16", "bgr16", "rgba16", "bgra16"});
+  const cv::Mat view = viewOf(msg, topic);
+  EncodingInfo info;
+  lookupEncoding(msg.encoding, &info);
+  const int W = static_cast<int>(msg.width), H = static_cast<int>(msg.height);
+  const int planes = info.channels == 1 ? 1 : 3;
+  image.resize(W, H, planes);
+  const int source_channel[3] = {info.r, info.g, info.b};
+  for (int y = 0; y < H; ++y) {
+    for (int c = 0; c < planes; ++c) {
+      float* out = image.plane(c) + static_cast<std::size_t>(y) * W;
+      const int sc = source_channel[c];
+      if (info.bytes_per_channel == 1) {
+        const std::uint8_t* row = view.ptr<std::uint8_t>(y);
+        // 8-bit value to [0, 1].
+        for (int x = 0; x < W; ++x) {
+          out[x] = row[x * info.channels + sc] * (1.0f / 255.0f);
+        }
+      } else {
+        const std::uint16_t* row = view.ptr<std::uint16_t>(y);
+        // 16-bit value to [0, 1].
+        for (int x = 0; x < W; ++x) {
+          out[x] = row[x * info.channels + sc] * (1.0f / 65535.0f);
+        }
+      }
+    }
+  }
+}
+
+void normalsFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
+                        double unit_tolerance, NormalMap& normals) {
+  requireEncoding(msg, topic,
+                  {"32FC3", "rgb8", "8UC3", "bgr8", "rgba8", "bgra8"});
+  const cv::Mat view = viewOf(msg, topic);
+  EncodingInfo info;
+  lookupEncoding(msg.encoding, &info);
+  const int W = static_cast<int>(msg.width), H = static_cast<int>(msg.height);
+  normals.resize(W, H, 3);
+  float* nx = normals.plane(0);
+  float* ny = normals.plane(1);
+  float* nz = normals.plane(2);
+  long valid = 0, non_unit = 0, infinite = 0;
+  int first_x = -1, first_y = -1;
+  float first_length = 0.0f;
+  for (int y = 0; y < H; ++y) {
+    const std::size_t row_start = static_cast<std::size_t>(y) * W;
+    if (info.is_float) {
+      const float* row = view.ptr<float>(y);
+      for (int x = 0; x < W; ++x) {
+        const float v[3] = {row[3 * x], row[3 * x + 1], row[3 * x + 2]};
+        float out[3] = {kNaN, kNaN, kNaN};
+        if (std::isinf(v[0]) || std::isinf(v[1]) || std::isinf(v[2])) {
+          ++infinite;
+        } else if (isValidNormal(v[0], v[1], v[2])) {
+          const float length =
+              std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+          if (std::abs(length - 1.0f) > unit_tolerance) {
+            if (non_unit++ == 0) {
+              first_x = x;
+              first_y = y;
+              first_length = length;
+            }
+          } else {
+            // Unit length within the tolerance: normalize exactly.
+            for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
+            ++valid;
+          }
+        }
+        nx[row_start + x] = out[0];
+        ny[row_start + x] = out[1];
+        nz[row_start + x] = out[2];
+      }
+    } else {
+      const std::uint8_t* row = view.ptr<std::uint8_t>(y);
+      for (int x = 0; x < W; ++x) {
+        const std::uint8_t* p = row + x * info.channels;
+        const int r = p[info.r], g = p[info.g], b = p[info.b];
+        float out[3] = {kNaN, kNaN, kNaN};
+        if (r != 0 || g != 0 || b != 0) {
+          // Decode n = c / 255 * 2 - 1, then normalize.
+          const float v[3] = {r * (2.0f / 255.0f) - 1.0f,
+                              g * (2.0f / 255.0f) - 1.0f,
+                              b * (2.0f / 255.0f) - 1.0f};
+          const float length =
+              std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+          if (length > 1e-3f) {
+            for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
+            ++valid;
+          }
+        }
+        nx[row_start + x] = out[0];
+        ny[row_start + x] = out[1];
+        nz[row_start + x] = out[2];
+      }
+    }
+  }
+  if (infinite > 0) {
+    throw InputError(topic + ": " + std::to_string(infinite) +
+                     " pixels hold infinite values; expected finite x, y, z "
+                     "(NaN = missing)");
+  }
+  if (non_unit > 0) {
+    std::ostringstream text;
+    text << topic << ": " << non_unit << " of " << W * H
+         << " normals are not unit vectors (|n| = " << first_length << " at ("
+         << first_x << ", " << first_y << ")); expected |n| within 1 +- "
+         << unit_tolerance;
+    throw InputError(text.str());
+  }
+  if (valid == 0) {
+    throw InputError(topic + ": no valid normal in the " + sizeText(W, H) +
+                     " map (all NaN or zero); expected at least one");
+  }
+}
+
+void confidenceFromMessage(const sensor_msgs::Image& msg,
+                           const std::string& topic, ScalarMap& confidence) {
+  requireEncoding(msg, topic, {"32FC1"});
+  const cv::Mat view = viewOf(msg, topic);
+  const int W = static_cast<int>(msg.width), H = static_cast<int>(msg.height);
+  confidence.resize(W, H, 1);
+  long outside = 0;
+  float first_bad = 0.0f;
+  for (int y = 0; y < H; ++y) {
+    const float* row = view.ptr<float>(y);
+    float* out = confidence.plane(0) + static_cast<std::size_t>(y) * W;
+    for (int x = 0; x < W; ++x) {
+      const float c = row[x];
+      if (std::isnan(c)) {
+        out[x] = 0.0f;
+      } else if (c < 0.0f || c > 1.0f) {
+        if (outside++ == 0) first_bad = c;
+        out[x] = 0.0f;
+      } else {
+        out[x] = c;
+      }
+    }
+  }
+  if (outside > 0) {
+    std::ostringstream text;
+    text << topic << ": " << outside
+         << " confidence values outside [0, 1] (e.g. " << first_bad
+         << "); expected values in [0, 1]";
+    throw InputError(text.str());
+  }
+}
+
+CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
+                                          const std::string& topic,
+                                          int image_width, int image_height) {
+  for (int i = 0; i < 9; ++i) {
+    if (!std::isfinite(msg.K[i])) {
+      throw InputError(topic + ": K[" + std::to_string(i) +
+                       "] is not finite; expected a finite K");
+    }
+  }
+  if (!(msg.K[0] > 0.0) || !(msg.K[4] > 0.0) || msg.K[8] != 1.0 ||
+      msg.K[6] != 0.0 || msg.K[7] != 0.0) {
+    std::ostringstream text;
+    text << topic << ": expected K with fx, fy > 0 and last row (0, 0, 1), got"
+         << " fx = " << msg.K[0] << ", fy = " << msg.K[4] << ", last row ("
+         << msg.K[6] << ", " << msg.K[7] << ", " << msg.K[8] << ")";
+    throw InputError(text.str());
+  }
+  if ((msg.width != 0 || msg.height != 0) &&
+      (static_cast<int>(msg.width) != image_width ||
+       static_cast<int>(msg.height) != image_height)) {
+    throw InputError(topic + ": camera_info is for a " +
+                     sizeText(msg.width, msg.height) +
+                     " image; expected the image's size " +
+                     sizeText(image_width, image_height));
+  }
+  CameraIntrinsics K;
+  for (int i = 0; i < 9; ++i) K.K[i] = msg.K[i];
+  K.validate();
+  return K;
+}
+
+void resampleMap(const PlanarImage& source, int width, int height,
+                 Resampling method, bool is_normal_map,
+                 const std::string& topic, PlanarImage& target) {
+  const int w = source.width(), h = source.height(), C = source.channels();
+  // Same aspect ratio: (width / w) / (height / h) within 1 %.
+  const double ratio =
+      (static_cast<double>(width) * h) / (static_cast<double>(height) * w);
+  if (std::abs(ratio - 1.0) > 0.01) {
+    throw InputError(topic + ": a " + sizeText(w, h) +
+                     " map cannot be resampled to the image's " +
+                     sizeText(width, height) +
+                     ": expected the same aspect ratio");
+  }
+  target.resize(width, height, C);
+  const double sx = static_cast<double>(w) / width;
+  const double sy = static_cast<double>(h) / height;
+  const std::size_t source_pixels = source.pixelCount();
+  auto valid = [&](std::size_t i) {
+    if (is_normal_map) {
+      return isValidNormal(source.plane(0)[i], source.plane(1)[i],
+                           source.plane(2)[i]);
+    }
+    for (int c = 0; c < C; ++c) {
+      if (!std::isfinite(source.plane(c)[i])) return false;
+    }
+    return true;
+  };
+  for (int y = 0; y < height; ++y) {
+    // Source coordinate of the target pixel centre: v = sy (y + 0.5) - 0.5.
+    const double vs = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), h - 1.0);
+    for (int x = 0; x < width; ++x) {
+      const double us = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), w - 1.0);
+      const std::size_t t = static_cast<std::size_t>(y) * width + x;
+      float acc[4] = {0, 0, 0, 0};
+      float total = 0.0f;
+      if (method == Resampling::kNearest) {
+        const std::size_t i =
+            static_cast<std::size_t>(std::lround(vs)) * w + std::lround(us);
+        if (valid(i)) {
+          for (int c = 0; c < C && c < 4; ++c) acc[c] = source.plane(c)[i];
+          total = 1.0f;
+        }
+      } else {
+        const int x0 = static_cast<int>(us), y0 = static_cast<int>(vs);
+        const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+        const float fx = static_cast<float>(us - x0);
+        const float fy = static_cast<float>(vs - y0);
+        const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+        const float ws[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
+                             fx * fy};
+        // Bilinear weights over the valid neighbours only.
+        for (int k = 0; k < 4; ++k) {
+          const std::size_t i = static_cast<std::size_t>(ys[k]) * w + xs[k];
+          if (ws[k] <= 0.0f || i >= source_pixels || !valid(i)) continue;
+          for (int c = 0; c < C && c < 4; ++c) {
+            acc[c] += ws[k] * source.plane(c)[i];
+          }
+          total += ws[k];
+        }
+      }
+      if (total <= 1e-6f) {
+        for (int c = 0; c < C; ++c) target.plane(c)[t] = kNaN;
+        continue;
+      }
+      if (is_normal_map) {
+        // Back to unit length (the weighted mean of unit vectors is shorter).
+        const float length =
+            std::sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]);
+        for (int c = 0; c < 3; ++c) {
+          target.plane(c)[t] = length > 1e-6f ? acc[c] / length : kNaN;
+        }
+      } else {
+        for (int c = 0; c < C && c < 4; ++c) {
+          target.plane(c)[t] = acc[c] / total;
+        }
+      }
+    }
+  }
+}
+
+void normalsToMessage(const NormalMap& normals, const std_msgs::Header& header,
+                      sensor_msgs::Image& msg) {
+  const int W = normals.width(), H = normals.height();
+  msg.header = header;
+  msg.width = W;
+  msg.height = H;
+  msg.encoding = "32FC3";
+  msg.is_bigendian = 0;
+  msg.step = static_cast<std::uint32_t>(W * 3 * sizeof(float));
+  msg.data.resize(static_cast<std::size_t>(msg.step) * H);
+  const std::size_t n = normals.pixelCount();
+  float pixel[3];
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) pixel[c] = normals.plane(c)[i];
+    std::memcpy(&msg.data[i * sizeof(pixel)], pixel, sizeof(pixel));
+  }
+}
+
+void normalsToVisMessage(const NormalMap& normals,
+                         const std_msgs::Header& header,
+                         sensor_msgs::Image& msg) {
+  const int W = normals.width(), H = normals.height();
+  msg.header = header;
+  msg.width = W;
+  msg.height = H;
+  msg.encoding = "rgb8";
+  msg.is_bigendian = 0;
+  msg.step = static_cast<std::uint32_t>(W * 3);
+  msg.data.resize(static_cast<std::size_t>(msg.step) * H);
+  const std::size_t n = normals.pixelCount();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float x = normals.plane(0)[i], y = normals.plane(1)[i],
+                z = normals.plane(2)[i];
+    const bool ok = isValidNormal(x, y, z);
+    const float v[3] = {x, y, z};
+    for (int c = 0; c < 3; ++c) {
+      // c = (n + 1) / 2 * 255, rounded; black where missing.
+      const float code = (v[c] + 1.0f) * 127.5f;
+      msg.data[3 * i + c] = ok ? static_cast<std::uint8_t>(std::lround(
+                                     std::min(std::max(code, 0.0f), 255.0f)))
+                               : 0;
+    }
+  }
+}
+
+}  // namespace node
+}  // namespace normal_fusion

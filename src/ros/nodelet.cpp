@@ -1,0 +1,665 @@
+#include "normal_fusion/ros/nodelet.h"
+
+#include <dynamic_reconfigure/Config.h>
+#include <pluginlib/class_list_macros.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <sstream>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/ros/conversions.h"
+
+namespace normal_fusion {
+namespace node {
+namespace {
+
+constexpr double kLogPeriodS = 5.0;
+
+/// Every known parameter present under the private namespace, typed as the
+/// parameter server holds it, plus any other scalar there (reported as
+/// unknown by settingsFromParameters).
+ParameterMap readParameterServer(const ros::NodeHandle& pnh,
+                                 std::vector<std::string>* warnings) {
+  ParameterMap params;
+  std::vector<std::string> names;
+  pnh.getParamNames(names);
+  const std::string prefix = pnh.getNamespace() + "/";
+  // Parameters that belong to other parts of ROS, not to the solver.
+  static const char* const kForeign[] = {"image_transport",
+                                         "diagnostic_period"};
+  for (const std::string& full : names) {
+    if (full.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string name = full.substr(prefix.size());
+    if (name.find('/') != std::string::npos) continue;  // nested namespaces
+    if (std::find(std::begin(kForeign), std::end(kForeign), name) !=
+        std::end(kForeign)) {
+      continue;
+    }
+    XmlRpc::XmlRpcValue value;
+    if (!pnh.getParam(name, value)) continue;
+    switch (value.getType()) {
+      case XmlRpc::XmlRpcValue::TypeBoolean:
+        params[name] = static_cast<bool>(value);
+        break;
+      case XmlRpc::XmlRpcValue::TypeInt:
+        params[name] = static_cast<int>(value);
+        break;
+      case XmlRpc::XmlRpcValue::TypeDouble:
+        params[name] = static_cast<double>(value);
+        break;
+      case XmlRpc::XmlRpcValue::TypeString:
+        params[name] = static_cast<std::string>(value);
+        break;
+      default:
+        warnings->push_back("parameter '" + name +
+                            "' is not a scalar (ignored)");
+    }
+  }
+  return params;
+}
+
+void setParameter(const ros::NodeHandle& pnh, const std::string& name,
+                  const ParameterValue& value) {
+  if (const bool* b = std::get_if<bool>(&value)) {
+    pnh.setParam(name, *b);
+  } else if (const int* n = std::get_if<int>(&value)) {
+    pnh.setParam(name, *n);
+  } else if (const double* d = std::get_if<double>(&value)) {
+    pnh.setParam(name, *d);
+  } else {
+    pnh.setParam(name, std::get<std::string>(value));
+  }
+}
+
+/// dynamic_reconfigure's message <-> the parameter map.
+void mergeConfigMessage(const dynamic_reconfigure::Config& msg,
+                        ParameterMap* params) {
+  for (const auto& p : msg.bools)
+    (*params)[p.name] = static_cast<bool>(p.value);
+  for (const auto& p : msg.ints) (*params)[p.name] = static_cast<int>(p.value);
+  for (const auto& p : msg.doubles) (*params)[p.name] = p.value;
+  for (const auto& p : msg.strs) (*params)[p.name] = p.value;
+}
+
+void writeConfigMessage(const ParameterMap& params,
+                        dynamic_reconfigure::Config* msg) {
+  for (auto& p : msg->bools) {
+    auto it = params.find(p.name);
+    if (it != params.end() && std::holds_alternative<bool>(it->second)) {
+      p.value = std::get<bool>(it->second);
+    }
+  }
+  for (auto& p : msg->ints) {
+    auto it = params.find(p.name);
+    if (it != params.end() && std::holds_alternative<int>(it->second)) {
+      p.value = std::get<int>(it->second);
+    }
+  }
+  for (auto& p : msg->doubles) {
+    auto it = params.find(p.name);
+    if (it != params.end() && std::holds_alternative<double>(it->second)) {
+      p.value = std::get<double>(it->second);
+    }
+  }
+  for (auto& p : msg->strs) {
+    auto it = params.find(p.name);
+    if (it != params.end() && std::holds_alternative<std::string>(it->second)) {
+      p.value = std::get<std::string>(it->second);
+    }
+  }
+}
+
+std::string withoutDigits(const std::string& text) {
+  std::string key;
+  for (char c : text) {
+    if (!std::isdigit(static_cast<unsigned char>(c)) && c != '.' && c != '-') {
+      key += c;
+    }
+  }
+  return key;
+}
+
+}  // namespace
+
+std::vector<TopicRole> topicRoles(const NodeSettings& settings) {
+  std::vector<TopicRole> roles;
+  roles.push_back({TopicRole::kImage, -1, "image"});
+  roles.push_back({TopicRole::kCameraInfo, -1, "camera_info"});
+  for (int i = 0; i < settings.num_inputs; ++i) {
+    roles.push_back({TopicRole::kNormals, i, "normals_" + std::to_string(i)});
+  }
+  for (int i = 0; i < settings.num_inputs; ++i) {
+    if (settings.inputs[i].use_confidence) {
+      roles.push_back(
+          {TopicRole::kConfidence, i, "confidence_" + std::to_string(i)});
+    }
+  }
+  return roles;
+}
+
+InputSet inputSetFrom(const std::vector<TopicRole>& roles,
+                      const std::vector<QueuedMessage>& messages,
+                      const std::vector<bool>& present, int num_inputs) {
+  InputSet set;
+  set.normals.resize(num_inputs);
+  set.confidence.resize(num_inputs);
+  std::vector<bool> wants_confidence(num_inputs, false);
+  for (std::size_t j = 0; j < roles.size(); ++j) {
+    const TopicRole& role = roles[j];
+    if (role.kind == TopicRole::kConfidence)
+      wants_confidence[role.input] = true;
+    if (!present[j]) continue;
+    switch (role.kind) {
+      case TopicRole::kImage:
+        set.image = messages[j].image;
+        break;
+      case TopicRole::kCameraInfo:
+        set.camera_info = messages[j].info;
+        break;
+      case TopicRole::kNormals:
+        set.normals[role.input] = messages[j].image;
+        break;
+      case TopicRole::kConfidence:
+        set.confidence[role.input] = messages[j].image;
+        break;
+    }
+  }
+  // An input that takes a confidence is present only with it.
+  for (int i = 0; i < num_inputs; ++i) {
+    if (wants_confidence[i] && !set.confidence[i]) set.normals[i].reset();
+    if (!set.normals[i]) set.confidence[i].reset();
+  }
+  return set;
+}
+
+NormalFusionNodelet::~NormalFusionNodelet() {
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    stop_ = true;
+  }
+  work_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+  timer_.stop();
+}
+
+void NormalFusionNodelet::onInit() {
+  ros::NodeHandle& nh = getNodeHandle();
+  ros::NodeHandle& pnh = getPrivateNodeHandle();
+
+  // Parameters: read, corrected in one function, written back so that
+  // dynamic_reconfigure starts from the corrected values and the library's
+  // defaults.
+  std::vector<std::string> warnings;
+  ParameterMap params = readParameterServer(pnh, &warnings);
+  settings_ = settingsFromParameters(params, &warnings);
+  for (const std::string& w : warnings) NODELET_WARN("%s", w.c_str());
+  const ParameterMap known = parametersFromSettings(settings_);
+  for (const auto& entry : known) {
+    setParameter(pnh, entry.first, params.at(entry.first));
+  }
+  static_params_ = known;
+  num_inputs_ = settings_.num_inputs;
+  queue_size_ = settings_.queue_size;
+
+  roles_ = topicRoles(settings_);
+  TopicNames names;
+  std::vector<bool> required;
+  for (TopicRole& role : roles_) {
+    role.name = nh.resolveName(role.name);
+    switch (role.kind) {
+      case TopicRole::kImage:
+        names.image = role.name;
+        required.push_back(true);
+        break;
+      case TopicRole::kCameraInfo:
+        names.camera_info = role.name;
+        required.push_back(true);
+        break;
+      case TopicRole::kNormals:
+        names.normals.push_back(role.name);
+        required.push_back(!settings_.inputs[role.input].optional);
+        break;
+      case TopicRole::kConfidence:
+        required.push_back(!settings_.inputs[role.input].optional);
+        break;
+    }
+  }
+  names.confidence.resize(settings_.num_inputs);
+  for (const TopicRole& role : roles_) {
+    if (role.kind == TopicRole::kConfidence) {
+      names.confidence[role.input] = role.name;
+    }
+  }
+  for (int i = 0; i < settings_.num_inputs; ++i) {
+    if (names.confidence[i].empty()) {
+      names.confidence[i] = nh.resolveName("confidence_" + std::to_string(i));
+    }
+  }
+  pipeline_ = std::make_unique<FusionPipeline>(settings_, names);
+  sync_ = std::make_unique<Synchronizer>(required, syncOptions(settings_));
+  last_arrival_.assign(roles_.size(), ros::WallTime());
+  tf_buffer_ = std::make_shared<tf2_ros::Buffer>();
+
+  // dynamic_reconfigure: its defaults are the library's.
+  reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<Config>>(
+      reconfigure_mutex_, pnh);
+  {
+    dynamic_reconfigure::Config msg;
+    Config defaults = Config::__getDefault__();
+    defaults.__toMessage__(msg);
+    writeConfigMessage(parametersFromSettings(NodeSettings()), &msg);
+    defaults.__fromMessage__(msg);
+    reconfigure_server_->setConfigDefault(defaults);
+  }
+  reconfigure_server_->setCallback(
+      [this](Config& config, uint32_t level) { configCb(config, level); });
+
+  worker_ = std::thread([this] { workerLoop(); });
+
+  updater_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  updater_->setHardwareID("none");
+  updater_->add("normal_fusion",
+                [this](diagnostic_updater::DiagnosticStatusWrapper& status) {
+                  diagnose(status);
+                });
+  timer_ = nh.createWallTimer(ros::WallDuration(1.0),
+                              [this](const ros::WallTimerEvent&) {
+                                updater_->update();
+                                checkMissingInputs();
+                              });
+
+  // Publishers; the lock keeps connectCb from running before all exist.
+  std::lock_guard<std::mutex> lock(connect_mutex_);
+  it_ = std::make_unique<image_transport::ImageTransport>(nh);
+  image_transport::SubscriberStatusCallback image_cb =
+      [this](const image_transport::SingleSubscriberPublisher&) {
+        connectCb();
+      };
+  ros::SubscriberStatusCallback stats_cb =
+      [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+  pub_fused_ = it_->advertise("fused_normals", 1, image_cb, image_cb);
+  pub_vis_ = it_->advertise("fused_normals_vis", 1, image_cb, image_cb);
+  pub_stats_ = nh.advertise<normal_fusion::FusionStats>("fusion_stats", 10,
+                                                        stats_cb, stats_cb);
+  std::string inputs;
+  for (const TopicRole& role : roles_) inputs += " " + role.name;
+  NODELET_INFO(
+      "normal_fusion: %d input(s), %s sync; inputs:%s", settings_.num_inputs,
+      settings_.approximate_sync ? "approximate" : "exact", inputs.c_str());
+}
+
+NormalFusionNodelet::Synchronizer::Options NormalFusionNodelet::syncOptions(
+    const NodeSettings& settings) const {
+  Synchronizer::Options options;
+  options.approximate = settings.approximate_sync;
+  options.queue_size = settings.queue_size;
+  options.max_interval_ns =
+      static_cast<std::int64_t>(settings.max_interval * 1e9 + 0.5);
+  return options;
+}
+
+void NormalFusionNodelet::connectCb() {
+  std::lock_guard<std::mutex> lock(connect_mutex_);
+  const bool wanted = pub_fused_.getNumSubscribers() > 0 ||
+                      pub_vis_.getNumSubscribers() > 0 ||
+                      pub_stats_.getNumSubscribers() > 0;
+  if (!wanted && subscribed_) {
+    sub_image_.shutdown();
+    for (ros::Subscriber& sub : subs_) sub.shutdown();
+    subs_.clear();
+    subscribed_ = false;
+    updateTfListener();
+    std::lock_guard<std::mutex> sync_lock(sync_mutex_);
+    sync_->reset();
+    NODELET_DEBUG("no subscribers: inputs unsubscribed");
+    return;
+  }
+  if (!wanted || subscribed_) return;
+
+  ros::NodeHandle& nh = getNodeHandle();
+  const int queue = queue_size_;
+  {
+    std::lock_guard<std::mutex> sync_lock(sync_mutex_);
+    subscribed_since_ = ros::WallTime::now();
+    last_set_time_ = ros::WallTime();
+  }
+  image_transport::TransportHints hints("raw", ros::TransportHints(),
+                                        getPrivateNodeHandle());
+  for (std::size_t j = 0; j < roles_.size(); ++j) {
+    const int topic = static_cast<int>(j);
+    const TopicRole& role = roles_[j];
+    if (role.kind == TopicRole::kImage) {
+      sub_image_ = it_->subscribe(
+          role.name, queue,
+          boost::function<void(const sensor_msgs::ImageConstPtr&)>(
+              [this, topic](const sensor_msgs::ImageConstPtr& msg) {
+                onMessage(topic, msg->header, QueuedMessage{msg, nullptr});
+              }),
+          ros::VoidPtr(), hints);
+    } else if (role.kind == TopicRole::kCameraInfo) {
+      boost::function<void(const sensor_msgs::CameraInfoConstPtr&)> cb =
+          [this, topic](const sensor_msgs::CameraInfoConstPtr& msg) {
+            onMessage(topic, msg->header, QueuedMessage{nullptr, msg});
+          };
+      subs_.push_back(nh.subscribe(role.name, queue, cb));
+    } else {
+      boost::function<void(const sensor_msgs::ImageConstPtr&)> cb =
+          [this, topic](const sensor_msgs::ImageConstPtr& msg) {
+            onMessage(topic, msg->header, QueuedMessage{msg, nullptr});
+          };
+      subs_.push_back(nh.subscribe(role.name, queue, cb));
+    }
+  }
+  subscribed_ = true;
+  updateTfListener();
+  NODELET_DEBUG("subscribed to %zu input topics", roles_.size());
+}
+
+void NormalFusionNodelet::updateTfListener() {
+  // Called with connect_mutex_ held: a listener only while subscribed and
+  // while a fixed frame asks for rotation compensation.
+  std::string fixed_frame;
+  {
+    std::lock_guard<std::mutex> lock(settings_mutex_);
+    fixed_frame = settings_.fixed_frame;
+  }
+  const bool wanted = subscribed_ && !fixed_frame.empty();
+  if (wanted && !tf_listener_) {
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(
+        *tf_buffer_, getNodeHandle());
+  } else if (!wanted && tf_listener_) {
+    tf_listener_.reset();
+  }
+}
+
+void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
+                                    const QueuedMessage& message) {
+  const TopicRole& role = roles_[topic];
+  try {
+    if (header.stamp.isZero()) {
+      throw InputError(role.name +
+                       ": the stamp is zero; expected the capture time");
+    }
+    if (message.image) checkImageLayout(*message.image, role.name);
+  } catch (const Error& e) {
+    ++frames_skipped_;
+    recordError(e.what());
+    logThrottled(true, std::string(e.what()) + "; message skipped");
+    return;
+  }
+  std::vector<Synchronizer::Set> sets;
+  {
+    std::lock_guard<std::mutex> lock(sync_mutex_);
+    last_arrival_[topic] = ros::WallTime::now();
+    const auto result = sync_->add(topic, header.stamp.toNSec(), message);
+    if (result == Synchronizer::AddResult::kOutOfOrder) {
+      std::ostringstream text;
+      text << role.name << ": stamp " << header.stamp
+           << " is not newer than the previous one on this topic "
+              "(out of order); message skipped";
+      ++frames_skipped_;
+      recordError(text.str());
+      logThrottled(true, text.str());
+      return;
+    }
+    if (result == Synchronizer::AddResult::kTimeReset) {
+      logThrottled(false, role.name +
+                              ": time jumped back by more than 1 s (a bag "
+                              "loop or a restarted player); synchronizer "
+                              "reset");
+    }
+    sets = sync_->poll();
+    if (!sets.empty()) last_set_time_ = ros::WallTime::now();
+  }
+  if (sets.empty()) return;
+  // Newest wins: only the last set is handed over; a set still waiting for
+  // the busy worker is replaced and counted as dropped.
+  InputSet set = inputSetFrom(roles_, sets.back().messages, sets.back().present,
+                              num_inputs_);
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    std::uint64_t dropped = sets.size() - 1;
+    if (pending_) ++dropped;
+    frames_dropped_ += dropped;
+    pending_ = std::move(set);
+    pending_formed_ = ros::WallTime::now();
+  }
+  work_cv_.notify_one();
+}
+
+void NormalFusionNodelet::configCb(Config& config, uint32_t /*level*/) {
+  dynamic_reconfigure::Config msg;
+  config.__toMessage__(msg);
+  ParameterMap params = static_params_;
+  mergeConfigMessage(msg, &params);
+  std::vector<std::string> warnings;
+  NodeSettings settings = settingsFromParameters(params, &warnings);
+  // The start-time parameters keep their start values.
+  {
+    std::lock_guard<std::mutex> lock(settings_mutex_);
+    settings.num_inputs = settings_.num_inputs;
+    settings.approximate_sync = settings_.approximate_sync;
+    settings.queue_size = settings_.queue_size;
+    for (int i = 0; i < kMaxInputs; ++i) {
+      settings.inputs[i].use_confidence = settings_.inputs[i].use_confidence;
+      settings.inputs[i].optional = settings_.inputs[i].optional;
+    }
+  }
+  for (const std::string& w : warnings) NODELET_WARN("%s", w.c_str());
+  writeConfigMessage(params, &msg);
+  config.__fromMessage__(msg);
+  {
+    std::lock_guard<std::mutex> lock(settings_mutex_);
+    settings_ = settings;
+    settings_changed_ = true;
+  }
+  if (sync_) {
+    std::lock_guard<std::mutex> lock(sync_mutex_);
+    sync_->setOptions(syncOptions(settings));
+  }
+  if (it_) {  // after onInit: the subscriptions may need a tf listener now
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    updateTfListener();
+  }
+}
+
+void NormalFusionNodelet::workerLoop() {
+  PipelineOutput output;
+  while (true) {
+    InputSet set;
+    ros::WallTime formed;
+    {
+      std::unique_lock<std::mutex> lock(work_mutex_);
+      work_cv_.wait(lock, [this] { return stop_ || pending_.has_value(); });
+      if (stop_) return;
+      set = std::move(*pending_);
+      pending_.reset();
+      formed = pending_formed_;
+    }
+    std::string fixed_frame;
+    double tf_timeout = 0.0;
+    {
+      std::lock_guard<std::mutex> lock(settings_mutex_);
+      if (settings_changed_) {
+        try {
+          pipeline_->setSettings(settings_);
+        } catch (const std::exception& e) {
+          recordError(e.what());
+          logThrottled(true, std::string("settings not applied: ") + e.what());
+        }
+        settings_changed_ = false;
+      }
+      fixed_frame = settings_.fixed_frame;
+      tf_timeout = settings_.tf_timeout;
+    }
+    RotationLookup rotation;
+    if (!fixed_frame.empty()) {
+      const RotationLookup lookup =
+          rotationLookupFromBuffer(*tf_buffer_, fixed_frame);
+      rotation = [this, lookup, fixed_frame, tf_timeout](
+                     const std::string& frame, const ros::Time& previous,
+                     const ros::Time& current, std::array<double, 9>* R,
+                     std::string* reason) {
+        // Wait up to tf_timeout for both ends of the transform.
+        tf_buffer_->canTransform(frame, current, frame, previous, fixed_frame,
+                                 ros::Duration(tf_timeout));
+        return lookup(frame, previous, current, R, reason);
+      };
+    }
+    try {
+      pipeline_->process(set, rotation, pub_vis_.getNumSubscribers() > 0,
+                         &output);
+    } catch (const std::exception& e) {
+      ++frames_skipped_;
+      recordError(e.what());
+      logThrottled(true, std::string(e.what()) + "; frame skipped");
+      continue;
+    }
+    if (!output.warning.empty()) logThrottled(false, output.warning);
+    ++frames_processed_;
+    const double latency = (ros::WallTime::now() - formed).toSec();
+    output.stats->latency = latency;
+    output.stats->frames_dropped = frames_dropped_;
+    output.stats->frames_skipped = frames_skipped_;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      recent_outputs_.emplace_back(ros::WallTime::now(), latency);
+      while (recent_outputs_.size() > 100) recent_outputs_.pop_front();
+      last_solve_time_ = output.stats->solve_time;
+    }
+    publishOutputs(output);
+  }
+}
+
+void NormalFusionNodelet::publishOutputs(const PipelineOutput& output) {
+  if (pub_fused_.getNumSubscribers() > 0) pub_fused_.publish(output.fused);
+  if (output.fused_vis) pub_vis_.publish(output.fused_vis);
+  pub_stats_.publish(output.stats);
+}
+
+void NormalFusionNodelet::recordError(const std::string& text) {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  last_error_ = text;
+  last_error_time_ = ros::WallTime::now();
+}
+
+void NormalFusionNodelet::logThrottled(bool is_error, const std::string& text) {
+  const std::string key = withoutDigits(text);
+  const ros::WallTime now = ros::WallTime::now();
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    auto it = last_logged_.find(key);
+    if (it != last_logged_.end() && (now - it->second).toSec() < kLogPeriodS) {
+      return;
+    }
+    last_logged_[key] = now;
+    if (last_logged_.size() > 1000) last_logged_.clear();
+  }
+  if (is_error) {
+    NODELET_ERROR("%s", text.c_str());
+  } else {
+    NODELET_WARN("%s", text.c_str());
+  }
+}
+
+void NormalFusionNodelet::checkMissingInputs() {
+  double timeout, max_interval;
+  bool approximate;
+  {
+    std::lock_guard<std::mutex> lock(settings_mutex_);
+    timeout = settings_.missing_input_timeout;
+    max_interval = settings_.max_interval;
+    approximate = settings_.approximate_sync;
+  }
+  if (timeout <= 0.0) return;
+  std::ostringstream text;
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    if (!subscribed_) return;
+  }
+  const ros::WallTime now = ros::WallTime::now();
+  {
+    std::lock_guard<std::mutex> lock(sync_mutex_);
+    const ros::WallTime since = std::max(last_set_time_, subscribed_since_);
+    if ((now - since).toSec() < timeout) return;
+    std::string missing;
+    for (std::size_t j = 0; j < roles_.size(); ++j) {
+      if (last_arrival_[j].isZero() || last_arrival_[j] < subscribed_since_) {
+        missing += " " + roles_[j].name + " (nothing received)";
+      } else if ((now - last_arrival_[j]).toSec() > timeout) {
+        std::ostringstream age;
+        age << " " << roles_[j].name << " (last message "
+            << (now - last_arrival_[j]).toSec() << " s ago)";
+        missing += age.str();
+      }
+    }
+    text << "no synchronized set for " << (now - since).toSec() << " s; ";
+    if (!missing.empty()) {
+      text << "missing inputs:" << missing;
+    } else {
+      text << "every input arrives but the stamps do not match ("
+           << (approximate ? "approximate" : "exact") << " sync, max_interval "
+           << max_interval << " s); newest stamps:";
+      for (std::size_t j = 0; j < roles_.size(); ++j) {
+        const std::int64_t s = sync_->newestStamp(static_cast<int>(j));
+        text << " " << roles_[j].name << " ";
+        if (s == Synchronizer::kNone) {
+          text << "none";
+        } else {
+          text << ros::Time().fromNSec(static_cast<std::uint64_t>(s));
+        }
+      }
+    }
+  }
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    auto it = last_logged_.find("missing");
+    if (it != last_logged_.end() && (now - it->second).toSec() < timeout) {
+      return;
+    }
+    last_logged_["missing"] = now;
+  }
+  NODELET_WARN("%s", text.str().c_str());
+}
+
+void NormalFusionNodelet::diagnose(
+    diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  const ros::WallTime now = ros::WallTime::now();
+  int recent = 0;
+  double latency_sum = 0.0;
+  for (const auto& entry : recent_outputs_) {
+    if ((now - entry.first).toSec() <= 5.0) {
+      ++recent;
+      latency_sum += entry.second;
+    }
+  }
+  const double rate = recent / 5.0;
+  const double latency = recent > 0 ? latency_sum / recent : 0.0;
+  const bool recent_error =
+      !last_error_time_.isZero() && (now - last_error_time_).toSec() < 5.0;
+  if (recent_error) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_error_);
+  } else if (frames_processed_ == 0) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK,
+                   "no frame processed yet");
+  } else {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "fusing");
+  }
+  status.add("output rate (Hz, last 5 s)", rate);
+  status.add("mean latency (s, last 5 s)", latency);
+  status.add("last solve time (s)", last_solve_time_);
+  status.add("frames processed", static_cast<std::uint64_t>(frames_processed_));
+  status.add("frames dropped (worker busy)",
+             static_cast<std::uint64_t>(frames_dropped_));
+  status.add("frames skipped (bad input)",
+             static_cast<std::uint64_t>(frames_skipped_));
+  status.add("last error", last_error_.empty() ? "none" : last_error_);
+}
+
+}  // namespace node
+}  // namespace normal_fusion
+
+PLUGINLIB_EXPORT_CLASS(normal_fusion::node::NormalFusionNodelet,
+                       nodelet::Nodelet)

@@ -1,0 +1,453 @@
+#include "normal_fusion/ros/parameters.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include "normal_fusion/errors.h"
+
+namespace normal_fusion {
+namespace node {
+
+// Enum names, found by the visitors through one overload set.
+std::string toStringEnum(DataPenalty v) { return toString(v); }
+std::string toStringEnum(VisibilityMode v) { return toString(v); }
+std::string toStringEnum(EdgeColorMode v) { return toString(v); }
+std::string toStringEnum(EdgeWeightFunction v) { return toString(v); }
+std::string toStringEnum(EdgeGradient v) { return toString(v); }
+std::string toStringEnum(SolverBackend v) { return toString(v); }
+std::string toStringEnum(Resampling v) { return toString(v); }
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int kIntMax = std::numeric_limits<int>::max();
+
+std::string indexed(const char* stem, int i) {
+  return std::string(stem) + "_" + std::to_string(i);
+}
+
+/// Visits every parameter of `s`: the single list of names, fields and ranges
+/// that both directions (map -> settings, settings -> map) walk.
+template <typename Visitor>
+void visitParameters(NodeSettings& s, Visitor& v) {
+  SolverSettings& solver = s.solver;
+  // Model.
+  v.real("lambda", solver.lambda, 0.0, kInf);
+  v.real("huber_eps", solver.huber_eps, 0.0, kInf);
+  v.choice("penalty", solver.penalty, parseDataPenalty);
+  v.choice("visibility", solver.visibility, parseVisibilityMode);
+  // Edge weights.
+  v.flag("edge_enabled", solver.edges.enabled);
+  v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, kInf);
+  v.real("edge_alpha", solver.edges.alpha, 0.0, kInf);
+  v.real("edge_beta", solver.edges.beta, 0.0, kInf);
+  v.real("edge_w_min", solver.edges.w_min, 0.0, 1.0);
+  v.choice("edge_color_mode", solver.edges.color_mode, parseEdgeColorMode);
+  v.choice("edge_function", solver.edges.function, parseEdgeWeightFunction);
+  v.choice("edge_gradient", solver.edges.gradient, parseEdgeGradient);
+  // Iterations and stopping.
+  v.integer("inner_iterations", solver.inner_iterations, 1, kIntMax);
+  v.integer("max_outer_iterations", solver.max_outer_iterations, 1, kIntMax);
+  v.integer("max_total_inner_iterations", solver.max_total_inner_iterations, 1,
+            kIntMax);
+  v.real("relative_tolerance", solver.relative_tolerance, 0.0, kInf);
+  v.real("time_budget_ms", solver.time_budget_ms, 0.0, kInf);
+  v.integer("pyramid_levels", solver.pyramid_levels, 0, 12);
+  // Execution.
+  v.integer("num_threads", solver.num_threads, 0, 1024);
+  v.choice("backend", solver.backend, parseSolverBackend);
+  v.flag("preconditioning", solver.preconditioning);
+  v.real("tau", solver.tau, 0.0, kInf);
+  v.real("sigma", solver.sigma, 0.0, kInf);
+
+  // The node: inputs.
+  v.integer("num_inputs", s.num_inputs, 1, kMaxInputs);
+  for (int i = 0; i < kMaxInputs; ++i) {
+    InputSettings& input = s.inputs[i];
+    v.real(indexed("weight", i).c_str(), input.weight, 0.0, kInf);
+    v.orientation(indexed("orientation", i).c_str(), input);
+    v.flag(indexed("use_confidence", i).c_str(), input.use_confidence);
+    v.flag(indexed("optional", i).c_str(), input.optional);
+  }
+  v.choice("resampling", s.resampling, parseResampling);
+  v.real("unit_tolerance", s.unit_tolerance, 0.0, 1.0);
+  // Synchronization.
+  v.flag("approximate_sync", s.approximate_sync);
+  v.integer("queue_size", s.queue_size, 1, 1000);
+  v.real("max_interval", s.max_interval, 0.0, 3600.0);
+  v.real("missing_input_timeout", s.missing_input_timeout, 0.0, 1e6);
+  // Warm start.
+  v.flag("warm_start", s.warm_start);
+  v.real("warm_start_max_gap", s.warm_start_max_gap, 0.0, 1e6);
+  v.text("fixed_frame", s.fixed_frame);
+  v.real("tf_timeout", s.tf_timeout, 0.0, 10.0);
+}
+
+const char* typeName(const ParameterValue& value) {
+  switch (value.index()) {
+    case 0:
+      return "bool";
+    case 1:
+      return "int";
+    case 2:
+      return "double";
+    default:
+      return "string";
+  }
+}
+
+std::string numberText(double value) {
+  std::ostringstream out;
+  out << value;
+  return out.str();
+}
+
+/// Map -> settings: reads each field, correcting and reporting bad values.
+class Reader {
+ public:
+  Reader(ParameterMap& params, std::vector<std::string>* warnings)
+      : params_(params), warnings_(warnings) {}
+
+  void real(const char* name, double& field, double lo, double hi) {
+    seen_.insert(name);
+    auto it = params_.find(name);
+    if (it == params_.end()) {
+      params_[name] = field;
+      return;
+    }
+    double value;
+    if (const double* d = std::get_if<double>(&it->second)) {
+      value = *d;
+    } else if (const int* n = std::get_if<int>(&it->second)) {
+      value = *n;
+    } else {
+      return replace(
+          it, field,
+          "expected a number, got a " + std::string(typeName(it->second)));
+    }
+    if (std::isnan(value)) return replace(it, field, "expected a number");
+    if (value < lo || value > hi) {
+      const double clamped = std::min(std::max(value, lo), hi);
+      if (!std::isfinite(clamped)) {
+        return replace(it, field, "expected a finite number");
+      }
+      return replace(
+          it, clamped,
+          "out of range [" + numberText(lo) + ", " + numberText(hi) + "]",
+          &field);
+    }
+    field = value;
+    it->second = value;
+  }
+
+  void integer(const char* name, int& field, int lo, int hi) {
+    seen_.insert(name);
+    auto it = params_.find(name);
+    if (it == params_.end()) {
+      params_[name] = field;
+      return;
+    }
+    long long value;
+    if (const int* n = std::get_if<int>(&it->second)) {
+      value = *n;
+    } else if (const double* d = std::get_if<double>(&it->second)) {
+      if (!std::isfinite(*d) || std::abs(*d) > 1e9) {
+        return replace(it, field, "expected an integer");
+      }
+      value = std::llround(*d);
+      if (static_cast<double>(value) != *d) {
+        const int rounded = static_cast<int>(
+            std::min<long long>(std::max<long long>(value, lo), hi));
+        return replace(it, rounded, "expected an integer", &field);
+      }
+    } else {
+      return replace(
+          it, field,
+          "expected an integer, got a " + std::string(typeName(it->second)));
+    }
+    if (value < lo || value > hi) {
+      const int clamped = static_cast<int>(
+          std::min<long long>(std::max<long long>(value, lo), hi));
+      return replace(it, clamped,
+                     "out of range [" + std::to_string(lo) + ", " +
+                         std::to_string(hi) + "]",
+                     &field);
+    }
+    field = static_cast<int>(value);
+    it->second = field;
+  }
+
+  void flag(const char* name, bool& field) {
+    seen_.insert(name);
+    auto it = params_.find(name);
+    if (it == params_.end()) {
+      params_[name] = field;
+      return;
+    }
+    if (const bool* b = std::get_if<bool>(&it->second)) {
+      field = *b;
+      return;
+    }
+    if (const int* n = std::get_if<int>(&it->second)) {
+      if (*n == 0 || *n == 1) {
+        return replace(it, *n == 1, "expected true or false", &field);
+      }
+    }
+    replace(it, field, "expected true or false");
+  }
+
+  void text(const char* name, std::string& field) {
+    seen_.insert(name);
+    auto it = params_.find(name);
+    if (it == params_.end()) {
+      params_[name] = field;
+      return;
+    }
+    if (const std::string* t = std::get_if<std::string>(&it->second)) {
+      field = *t;
+      return;
+    }
+    replace(it, field,
+            "expected a string, got a " + std::string(typeName(it->second)));
+  }
+
+  template <typename Enum, typename Parse>
+  void choice(const char* name, Enum& field, Parse parse) {
+    std::string text_value = toStringEnum(field);
+    const std::string default_text = text_value;
+    text(name, text_value);
+    try {
+      field = parse(text_value);
+    } catch (const Error& e) {
+      auto it = params_.find(name);
+      replace(it, default_text, e.what());
+    }
+  }
+
+  void orientation(const char* name, InputSettings& input) {
+    const std::string default_text = input.orientation_name;
+    text(name, input.orientation_name);
+    try {
+      input.orientation = Orientation::fromString(input.orientation_name);
+    } catch (const Error& e) {
+      input.orientation_name = default_text;
+      input.orientation = Orientation::fromString(default_text);
+      auto it = params_.find(name);
+      replace(it, default_text, e.what());
+    }
+  }
+
+  void reportUnknown() {
+    for (const auto& entry : params_) {
+      if (seen_.count(entry.first) == 0 && warnings_ != nullptr) {
+        warnings_->push_back("unknown parameter '" + entry.first +
+                             "' = " + toString(entry.second) + " (ignored)");
+      }
+    }
+  }
+
+  void warn(const std::string& text) {
+    if (warnings_ != nullptr) warnings_->push_back(text);
+  }
+
+ private:
+  /// Writes the corrected `value` into the map (and into `field`, when given)
+  /// and reports it.
+  template <typename T, typename F = T>
+  void replace(ParameterMap::iterator it, const T& value,
+               const std::string& why, F* field = nullptr) {
+    const ParameterValue corrected = value;
+    warn("parameter '" + it->first + "' = " + toString(it->second) + ": " +
+         why + "; using " + toString(corrected));
+    it->second = corrected;
+    if (field != nullptr) *field = value;
+  }
+
+  ParameterMap& params_;
+  std::vector<std::string>* warnings_;
+  std::set<std::string> seen_;
+};
+
+/// Settings -> map.
+class Writer {
+ public:
+  explicit Writer(ParameterMap& params) : params_(params) {}
+  void real(const char* name, double& field, double, double) {
+    params_[name] = field;
+  }
+  void integer(const char* name, int& field, int, int) {
+    params_[name] = field;
+  }
+  void flag(const char* name, bool& field) { params_[name] = field; }
+  void text(const char* name, std::string& field) { params_[name] = field; }
+  template <typename Enum, typename Parse>
+  void choice(const char* name, Enum& field, Parse) {
+    params_[name] = toStringEnum(field);
+  }
+  void orientation(const char* name, InputSettings& input) {
+    params_[name] = input.orientation_name;
+  }
+
+ private:
+  ParameterMap& params_;
+};
+
+}  // namespace
+
+bool isDynamicParameter(const std::string& name) {
+  if (name == "num_inputs" || name == "approximate_sync" ||
+      name == "queue_size") {
+    return false;
+  }
+  return name.rfind("use_confidence_", 0) != 0 &&
+         name.rfind("optional_", 0) != 0;
+}
+
+ParameterMap parametersFromSettings(const NodeSettings& settings) {
+  ParameterMap params;
+  NodeSettings copy = settings;
+  Writer writer(params);
+  visitParameters(copy, writer);
+  return params;
+}
+
+NodeSettings settingsFromParameters(ParameterMap& params,
+                                    std::vector<std::string>* warnings) {
+  NodeSettings settings;
+  Reader reader(params, warnings);
+  visitParameters(settings, reader);
+  reader.reportUnknown();
+
+  SolverSettings& solver = settings.solver;
+  // Explicit step sizes come in pairs and must satisfy the step condition.
+  const bool tau_set = solver.tau > 0.0, sigma_set = solver.sigma > 0.0;
+  const double step_product =
+      solver.tau * solver.sigma * (8.0 + settings.num_inputs);
+  if (tau_set != sigma_set || (tau_set && step_product >= 1.0)) {
+    std::ostringstream why;
+    why << "parameters 'tau' = " << solver.tau
+        << " and 'sigma' = " << solver.sigma << ": ";
+    if (tau_set != sigma_set) {
+      why << "set both (> 0) or neither (0 = automatic)";
+    } else {
+      why << "expected tau * sigma * (8 + num_inputs) < 1, got "
+          << step_product;
+    }
+    why << "; using 0 and 0 (automatic steps)";
+    reader.warn(why.str());
+    solver.tau = solver.sigma = 0.0;
+    params["tau"] = 0.0;
+    params["sigma"] = 0.0;
+  }
+  // The library's own check, for any rule the list above does not know.
+  try {
+    solver.validate();
+  } catch (const Error& e) {
+    reader.warn(std::string("solver settings rejected (") + e.what() +
+                "); using the library's defaults for all solver settings");
+    settings.solver = SolverSettings();
+    const ParameterMap corrected = parametersFromSettings(settings);
+    for (const auto& entry : corrected) params[entry.first] = entry.second;
+  }
+  return settings;
+}
+
+ParameterMap parametersFromYamlFile(const std::string& path,
+                                    std::vector<std::string>* warnings) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const std::exception& e) {
+    throw InputError("parameters file " + path +
+                     ": expected a readable YAML file (" + e.what() + ")");
+  }
+  ParameterMap params;
+  if (root.IsNull()) return params;
+  if (!root.IsMap()) {
+    throw InputError("parameters file " + path +
+                     ": expected a map of parameter names to values");
+  }
+  for (const auto& entry : root) {
+    const std::string name = entry.first.as<std::string>();
+    const YAML::Node& node = entry.second;
+    if (!node.IsScalar()) {
+      if (warnings != nullptr) {
+        warnings->push_back("parameters file " + path + ": '" + name +
+                            "' is not a scalar (ignored)");
+      }
+      continue;
+    }
+    const std::string text = node.Scalar();
+    if (node.Tag() == "!") {  // quoted: always a string
+      params[name] = text;
+      continue;
+    }
+    std::string lower = text;
+    std::transform(lower.begin(), lower.end(), lower.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    if (lower == "true" || lower == "yes" || lower == "on") {
+      params[name] = true;
+      continue;
+    }
+    if (lower == "false" || lower == "no" || lower == "off") {
+      params[name] = false;
+      continue;
+    }
+    char* end = nullptr;
+    const long long as_int = std::strtoll(text.c_str(), &end, 10);
+    if (!text.empty() && end != nullptr && *end == '\0' &&
+        as_int >= std::numeric_limits<int>::min() && as_int <= kIntMax) {
+      params[name] = static_cast<int>(as_int);
+      continue;
+    }
+    if (lower == ".inf" || lower == "+.inf") {
+      params[name] = kInf;
+      continue;
+    }
+    if (lower == "-.inf") {
+      params[name] = -kInf;
+      continue;
+    }
+    if (lower == ".nan") {
+      params[name] = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
+    const double as_double = std::strtod(text.c_str(), &end);
+    if (!text.empty() && end != nullptr && *end == '\0') {
+      params[name] = as_double;
+      continue;
+    }
+    params[name] = text;
+  }
+  return params;
+}
+
+std::string toString(Resampling value) {
+  return value == Resampling::kNearest ? "nearest" : "bilinear";
+}
+
+Resampling parseResampling(const std::string& name) {
+  if (name == "nearest") return Resampling::kNearest;
+  if (name == "bilinear") return Resampling::kBilinear;
+  throw ParameterError("resampling '" + name +
+                       "': expected one of nearest bilinear");
+}
+
+std::string toString(const ParameterValue& value) {
+  struct Printer {
+    std::string operator()(bool b) const { return b ? "true" : "false"; }
+    std::string operator()(int n) const { return std::to_string(n); }
+    std::string operator()(double d) const { return numberText(d); }
+    std::string operator()(const std::string& s) const { return "'" + s + "'"; }
+  };
+  return std::visit(Printer(), value);
+}
+
+}  // namespace node
+}  // namespace normal_fusion

@@ -1,0 +1,283 @@
+#include "normal_fusion/ros/pipeline.h"
+
+#include <boost/make_shared.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/ros/conversions.h"
+#include "normal_fusion/warp.h"
+
+namespace normal_fusion {
+namespace node {
+
+TopicNames TopicNames::defaults(int num_inputs) {
+  TopicNames names;
+  for (int i = 0; i < num_inputs; ++i) {
+    names.normals.push_back("normals_" + std::to_string(i));
+    names.confidence.push_back("confidence_" + std::to_string(i));
+  }
+  return names;
+}
+
+RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
+                                        const std::string& fixed_frame) {
+  return [&buffer, fixed_frame](
+             const std::string& frame, const ros::Time& previous,
+             const ros::Time& current, std::array<double, 9>* R_cur_prev,
+             std::string* reason) {
+    try {
+      // X_cur = T X_prev: source frame at the previous stamp, target frame at
+      // the current one, chained through the fixed frame.
+      const geometry_msgs::TransformStamped T =
+          buffer.lookupTransform(frame, current, frame, previous, fixed_frame);
+      const auto& q = T.transform.rotation;
+      const double n = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+      if (!(n > 1e-9) || !std::isfinite(n)) {
+        *reason = "the transform's quaternion is not a rotation";
+        return false;
+      }
+      const double x = q.x / n, y = q.y / n, z = q.z / n, w = q.w / n;
+      // Unit quaternion to a row-major rotation matrix.
+      *R_cur_prev = {1 - 2 * (y * y + z * z), 2 * (x * y - z * w),
+                     2 * (x * z + y * w),     2 * (x * y + z * w),
+                     1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                     2 * (x * z - y * w),     2 * (y * z + x * w),
+                     1 - 2 * (x * x + y * y)};
+      return true;
+    } catch (const std::exception& e) {
+      *reason = e.what();
+      return false;
+    }
+  };
+}
+
+FusionPipeline::FusionPipeline(const NodeSettings& settings,
+                               const TopicNames& topics)
+    : settings_(settings), topics_(topics), solver_(settings.solver) {
+  const int L = settings_.num_inputs;
+  if (static_cast<int>(topics_.normals.size()) < L ||
+      static_cast<int>(topics_.confidence.size()) < L) {
+    const TopicNames defaults = TopicNames::defaults(L);
+    topics_.normals.resize(L);
+    topics_.confidence.resize(L);
+    for (int i = 0; i < L; ++i) {
+      if (topics_.normals[i].empty()) topics_.normals[i] = defaults.normals[i];
+      if (topics_.confidence[i].empty()) {
+        topics_.confidence[i] = defaults.confidence[i];
+      }
+    }
+  }
+  raw_normals_.resize(L);
+  raw_confidence_.resize(L);
+}
+
+void FusionPipeline::setSettings(const NodeSettings& settings) {
+  if (settings.num_inputs != settings_.num_inputs) {
+    throw ParameterError("num_inputs cannot change while running: expected " +
+                         std::to_string(settings_.num_inputs) + ", got " +
+                         std::to_string(settings.num_inputs));
+  }
+  solver_.setSettings(settings.solver);
+  settings_ = settings;
+}
+
+void FusionPipeline::resetWarmStart() {
+  has_previous_ = false;
+  state_.clear();
+}
+
+bool FusionPipeline::canWarmStart(const CameraIntrinsics& K,
+                                  const ros::Time& stamp,
+                                  std::string* reason) const {
+  if (!has_previous_) {
+    *reason = "no previous frame";
+    return false;
+  }
+  if (!state_.compatible(problem_.image.width(), problem_.image.height(),
+                         settings_.num_inputs)) {
+    *reason = "the image size changed";
+    return false;
+  }
+  for (int i = 0; i < 9; ++i) {
+    if (std::abs(K.K[i] - previous_K_.K[i]) >
+        1e-9 * std::max(1.0, std::abs(previous_K_.K[i]))) {
+      *reason = "K changed";
+      return false;
+    }
+  }
+  const double gap = (stamp - previous_stamp_).toSec();
+  if (gap > settings_.warm_start_max_gap) {
+    std::ostringstream text;
+    text << "stamp gap " << gap << " s exceeds warm_start_max_gap";
+    *reason = text.str();
+    return false;
+  }
+  return true;
+}
+
+void FusionPipeline::process(const InputSet& set,
+                             const RotationLookup& rotation, bool make_vis,
+                             PipelineOutput* output) {
+  const auto started = std::chrono::steady_clock::now();
+  output->warning.clear();
+  if (!set.image) throw InputError(topics_.image + ": no image in the set");
+  if (!set.camera_info) {
+    throw InputError(topics_.camera_info +
+                     ": no camera_info for the image; expected one per image");
+  }
+  const sensor_msgs::Image& image_msg = *set.image;
+  const std::string& frame_id = image_msg.header.frame_id;
+  const ros::Time stamp = image_msg.header.stamp;
+
+  // Guide image and intrinsics.
+  imageFromMessage(image_msg, topics_.image, problem_.image);
+  const int W = problem_.image.width(), H = problem_.image.height();
+  problem_.K =
+      intrinsicsFromCameraInfo(*set.camera_info, topics_.camera_info, W, H);
+
+  // Normal maps (resampled to the image where their size differs), absent
+  // optional inputs as all-missing maps so that the input count stays fixed.
+  const int L = settings_.num_inputs;
+  problem_.inputs.resize(L);
+  std::vector<std::uint8_t> present(L, 0);
+  int present_count = 0;
+  for (int i = 0; i < L; ++i) {
+    NormalInput& input = problem_.inputs[i];
+    const InputSettings& config = settings_.inputs[i];
+    input.weight = config.weight;
+    input.orientation = config.orientation;
+    const sensor_msgs::ImageConstPtr normals_msg =
+        i < static_cast<int>(set.normals.size()) ? set.normals[i] : nullptr;
+    if (!normals_msg) {
+      input.normals.resize(W, H, 3);
+      input.normals.fill(std::numeric_limits<float>::quiet_NaN());
+      input.confidence = ScalarMap();
+      continue;
+    }
+    const std::string& topic = topics_.normals[i];
+    if (!normals_msg->header.frame_id.empty() && !frame_id.empty() &&
+        normals_msg->header.frame_id != frame_id) {
+      throw InputError(topic + ": frame_id '" + normals_msg->header.frame_id +
+                       "' differs from the image's '" + frame_id +
+                       "'; expected normals in the image's camera frame");
+    }
+    if (static_cast<int>(normals_msg->width) == W &&
+        static_cast<int>(normals_msg->height) == H) {
+      normalsFromMessage(*normals_msg, topic, settings_.unit_tolerance,
+                         input.normals);
+    } else {
+      normalsFromMessage(*normals_msg, topic, settings_.unit_tolerance,
+                         raw_normals_[i]);
+      resampleMap(raw_normals_[i], W, H, settings_.resampling, true, topic,
+                  input.normals);
+    }
+    const sensor_msgs::ImageConstPtr confidence_msg =
+        config.use_confidence && i < static_cast<int>(set.confidence.size())
+            ? set.confidence[i]
+            : nullptr;
+    if (confidence_msg) {
+      const std::string& ctopic = topics_.confidence[i];
+      if (static_cast<int>(confidence_msg->width) == W &&
+          static_cast<int>(confidence_msg->height) == H) {
+        confidenceFromMessage(*confidence_msg, ctopic, input.confidence);
+      } else {
+        confidenceFromMessage(*confidence_msg, ctopic, raw_confidence_[i]);
+        resampleMap(raw_confidence_[i], W, H, settings_.resampling, false,
+                    ctopic, input.confidence);
+      }
+    } else {
+      input.confidence = ScalarMap();
+    }
+    present[i] = 1;
+    ++present_count;
+  }
+  if (present_count == 0) {
+    throw InputError(topics_.image +
+                     ": the set holds no normal map; expected at least one");
+  }
+
+  // Warm start: from the previous result when it fits, rotated when asked.
+  bool warm = false, rotated = false;
+  if (has_previous_ && stamp < previous_stamp_) {
+    std::ostringstream text;
+    text << "time went backwards by " << (previous_stamp_ - stamp).toSec()
+         << " s (a bag loop or a restarted player): warm start reset";
+    output->warning = text.str();
+    resetWarmStart();
+  }
+  std::string reason;
+  if (settings_.warm_start && canWarmStart(problem_.K, stamp, &reason)) {
+    warm = true;
+    if (!settings_.fixed_frame.empty()) {
+      std::array<double, 9> R_cur_prev{};
+      std::string why;
+      if (!rotation) {
+        why = "no transform source";
+      } else if (frame_id.empty()) {
+        why = "the image has no frame_id";
+      } else if (rotation(frame_id, previous_stamp_, stamp, &R_cur_prev,
+                          &why)) {
+        try {
+          warpStateByRotation(state_, problem_.K, R_cur_prev);
+          rotated = true;
+        } catch (const Error& e) {
+          why = e.what();
+        }
+      }
+      if (!rotated) {
+        warm = false;
+        output->warning = "rotation of '" + frame_id + "' relative to '" +
+                          settings_.fixed_frame + "' unknown (" + why +
+                          "): cold start";
+      }
+    }
+  }
+
+  try {
+    solver_.solve(problem_, state_, warm, report_);
+  } catch (...) {
+    resetWarmStart();
+    throw;
+  }
+  has_previous_ = true;
+  previous_stamp_ = stamp;
+  previous_K_ = problem_.K;
+  ++frames_processed_;
+
+  // Outputs with the image's header.
+  output->fused = boost::make_shared<sensor_msgs::Image>();
+  normalsToMessage(state_.normals, image_msg.header, *output->fused);
+  output->fused_vis.reset();
+  if (make_vis) {
+    output->fused_vis = boost::make_shared<sensor_msgs::Image>();
+    normalsToVisMessage(state_.normals, image_msg.header, *output->fused_vis);
+  }
+  auto stats = boost::make_shared<normal_fusion::FusionStats>();
+  stats->header = image_msg.header;
+  stats->outer_iterations = report_.outer_iterations;
+  stats->inner_iterations = report_.inner_iterations;
+  stats->coarse_inner_iterations = report_.coarse_inner_iterations;
+  stats->pyramid_levels = report_.pyramid_levels;
+  stats->initial_energy = report_.initial_energy;
+  stats->final_energy = report_.final_energy;
+  stats->solve_time = report_.seconds;
+  stats->warm_started = report_.warm_started;
+  stats->rotation_compensated = rotated && report_.warm_started;
+  stats->converged = report_.converged;
+  stats->budget_exhausted = report_.budget_exhausted;
+  stats->inputs_present.assign(present.begin(), present.end());
+  stats->valid_pixels = report_.valid_pixels;
+  stats->filled_pixels = report_.filled_pixels;
+  stats->frames_processed = frames_processed_;
+  stats->latency =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started)
+          .count();
+  output->stats = stats;
+}
+
+}  // namespace node
+}  // namespace normal_fusion
