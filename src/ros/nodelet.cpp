@@ -389,6 +389,7 @@ void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
     return;
   }
   std::vector<Synchronizer::Set> sets;
+  std::vector<Synchronizer::Discard> discards;
   {
     std::lock_guard<std::mutex> lock(sync_mutex_);
     last_arrival_[topic] = ros::WallTime::now();
@@ -411,6 +412,28 @@ void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
     }
     sets = sync_->poll();
     if (!sets.empty()) last_set_time_ = ros::WallTime::now();
+    discards = sync_->takeDiscards();
+  }
+  // A camera_info must come with every image: its absence is an error. Other
+  // inputs may come at a lower rate, so images without them are expected.
+  for (const auto& discard : discards) {
+    if (discard.missing_topic < 0 ||
+        roles_[discard.missing_topic].kind != TopicRole::kCameraInfo) {
+      continue;
+    }
+    std::ostringstream text;
+    text << roles_[discard.missing_topic].name
+         << ": no camera_info for the image stamped "
+         << ros::Time().fromNSec(discard.stamp_ns) << " (nearest: ";
+    if (discard.nearest_ns == Synchronizer::kNone) {
+      text << "none queued";
+    } else {
+      text << ros::Time().fromNSec(discard.nearest_ns);
+    }
+    text << "); expected one with the image's stamp; frame skipped";
+    ++frames_skipped_;
+    recordError(text.str());
+    logThrottled(true, text.str());
   }
   if (sets.empty()) return;
   // Newest wins: only the last set is handed over; a set still waiting for

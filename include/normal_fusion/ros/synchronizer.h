@@ -54,6 +54,14 @@ class StampSynchronizer {
     std::vector<bool> present;
   };
 
+  /// A pivot discarded when its set was decided: the first required topic
+  /// without a matching message, and that topic's nearest stamp (or kNone).
+  struct Discard {
+    std::int64_t stamp_ns = 0;
+    int missing_topic = -1;
+    std::int64_t nearest_ns = 0;
+  };
+
   enum class AddResult {
     kQueued,      ///< queued (sets may be ready: call poll())
     kOutOfOrder,  ///< stamp not newer than the topic's newest: dropped
@@ -109,6 +117,14 @@ class StampSynchronizer {
   void reset() {
     for (auto& queue : queues_) queue.clear();
     std::fill(newest_.begin(), newest_.end(), kNone);
+  }
+
+  /// The pivots discarded since the last call (decided failures only, not
+  /// queue overflows).
+  std::vector<Discard> takeDiscards() {
+    std::vector<Discard> out;
+    out.swap(discards_);
+    return out;
   }
 
   /// Pivots discarded without a set, and messages dropped per topic because
@@ -191,6 +207,7 @@ class StampSynchronizer {
       std::vector<int> chosen(T, -1);
       chosen[0] = 0;
       bool wait = false, fail = false;
+      int failed_topic = -1;
       std::int64_t lo_stamp = t, hi_stamp = t;
       // Required topics first: they define the set.
       for (int j = 1; j < T && !wait && !fail; ++j) {
@@ -201,6 +218,7 @@ class StampSynchronizer {
           wait = true;
         } else if (p == Pick::kAbsent) {
           fail = true;
+          failed_topic = j;
         } else {
           chosen[j] = index;
           lo_stamp = std::min(lo_stamp, queues_[j][index].stamp);
@@ -208,8 +226,25 @@ class StampSynchronizer {
         }
       }
       if (wait) break;
-      if (!fail && hi_stamp - lo_stamp > options_.max_interval_ns) fail = true;
+      if (!fail && hi_stamp - lo_stamp > options_.max_interval_ns) {
+        fail = true;
+        // The required topic whose stamp lies farthest from the pivot's.
+        std::int64_t worst = -1;
+        for (int j = 1; j < T; ++j) {
+          if (chosen[j] < 0) continue;
+          const std::int64_t d = std::llabs(queues_[j][chosen[j]].stamp - t);
+          if (d > worst) {
+            worst = d;
+            failed_topic = j;
+          }
+        }
+      }
       if (fail) {
+        Discard discard;
+        discard.stamp_ns = t;
+        discard.missing_topic = failed_topic;
+        discard.nearest_ns = nearestStamp(failed_topic, t);
+        discards_.push_back(discard);
         // No set for this pivot: discard it and what can no longer match.
         ++unmatched_pivots_;
         pivots.pop_front();
@@ -248,6 +283,19 @@ class StampSynchronizer {
     return sets;
   }
 
+  std::int64_t nearestStamp(int topic, std::int64_t t) const {
+    std::int64_t best = kNone, best_d = INT64_MAX;
+    if (topic < 0) return kNone;
+    for (const Entry& e : queues_[topic]) {
+      const std::int64_t d = std::llabs(e.stamp - t);
+      if (d < best_d) {
+        best_d = d;
+        best = e.stamp;
+      }
+    }
+    return best;
+  }
+
   /// Drops messages that no pivot from stamp t on can take.
   void pruneOlderThan(std::int64_t t) {
     const std::int64_t limit =
@@ -264,6 +312,7 @@ class StampSynchronizer {
   std::vector<std::int64_t> newest_;
   std::vector<std::uint64_t> dropped_;
   std::uint64_t unmatched_pivots_ = 0;
+  std::vector<Discard> discards_;
 };
 
 }  // namespace node
