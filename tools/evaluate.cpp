@@ -668,6 +668,7 @@ struct CaseResult {
   bool has_fill = false;    ///< some pixels with ground truth lack every input
   double fill_share = 0.0;  ///< their share of the pixels with ground truth
   std::vector<std::string> variant_names;
+  std::vector<int> scene_ids;  ///< scene ids (castle: frame numbers)
   std::vector<Row> rows;  ///< inputs, best of each filter, regularizer runs
   int num_inputs = 0;
   int first_filter_row = 0;     ///< bilateral, then the peers
@@ -714,6 +715,7 @@ class CaseRunner {
       return SplitScore{scoreOn(estimate, scene.gt, valid),
                         scoreOn(estimate, scene.gt, fill)};
     };
+    scene_ids_.push_back(scene.scene_id);
     // Kept for the settings added past a grid's edge later.
     stored_.push_back(
         {scene.image, scene.gt, scene.filter_inputs, valid, fill});
@@ -752,6 +754,7 @@ class CaseRunner {
     result.id = id;
     result.title = title;
     result.variant_names = variant_names_;
+    result.scene_ids = scene_ids_;
     result.candidates = candidates_;
     for (const auto& scores : candidate_scores_) {
       result.candidate_means.push_back(meanOf(scores));
@@ -893,6 +896,7 @@ class CaseRunner {
   std::vector<std::vector<SplitScore>> run_scores_;
   std::vector<double> fill_shares_;
   std::vector<StoredScene> stored_;
+  std::vector<int> scene_ids_;
 };
 
 /// The scene of the example pictures, kept with the case result.
@@ -1360,11 +1364,12 @@ void writeCsv(const std::string& path, const std::vector<CaseResult>& cases) {
         for (int split = 0; split < (r.has_fill ? 2 : 1); ++split) {
           const Score& m =
               split == 0 ? row.scenes[s].valid : row.scenes[s].fill;
-          out << "\"" << r.id << "\"," << s << ",\"" << row.method << "\",\""
-              << row.setting << "\"," << (split == 0 ? "valid" : "fill") << ","
-              << std::setprecision(8) << m.psnr_db << "," << m.angles.mean_deg
-              << "," << m.angles.median_deg << "," << m.angles.within_11_25
-              << "," << m.angles.within_22_5 << "," << m.angles.within_30 << ","
+          out << "\"" << r.id << "\"," << r.scene_ids[s] << ",\"" << row.method
+              << "\",\"" << row.setting << "\","
+              << (split == 0 ? "valid" : "fill") << "," << std::setprecision(8)
+              << m.psnr_db << "," << m.angles.mean_deg << ","
+              << m.angles.median_deg << "," << m.angles.within_11_25 << ","
+              << m.angles.within_22_5 << "," << m.angles.within_30 << ","
               << m.produced << "\n";
         }
       }
