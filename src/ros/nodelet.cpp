@@ -122,57 +122,6 @@ std::string withoutDigits(const std::string& text) {
 
 }  // namespace
 
-std::vector<TopicRole> topicRoles(const NodeSettings& settings) {
-  std::vector<TopicRole> roles;
-  roles.push_back({TopicRole::kImage, -1, "image"});
-  roles.push_back({TopicRole::kCameraInfo, -1, "camera_info"});
-  for (int i = 0; i < settings.num_inputs; ++i) {
-    roles.push_back({TopicRole::kNormals, i, "normals_" + std::to_string(i)});
-  }
-  for (int i = 0; i < settings.num_inputs; ++i) {
-    if (settings.inputs[i].use_confidence) {
-      roles.push_back(
-          {TopicRole::kConfidence, i, "confidence_" + std::to_string(i)});
-    }
-  }
-  return roles;
-}
-
-InputSet inputSetFrom(const std::vector<TopicRole>& roles,
-                      const std::vector<QueuedMessage>& messages,
-                      const std::vector<bool>& present, int num_inputs) {
-  InputSet set;
-  set.normals.resize(num_inputs);
-  set.confidence.resize(num_inputs);
-  std::vector<bool> wants_confidence(num_inputs, false);
-  for (std::size_t j = 0; j < roles.size(); ++j) {
-    const TopicRole& role = roles[j];
-    if (role.kind == TopicRole::kConfidence)
-      wants_confidence[role.input] = true;
-    if (!present[j]) continue;
-    switch (role.kind) {
-      case TopicRole::kImage:
-        set.image = messages[j].image;
-        break;
-      case TopicRole::kCameraInfo:
-        set.camera_info = messages[j].info;
-        break;
-      case TopicRole::kNormals:
-        set.normals[role.input] = messages[j].image;
-        break;
-      case TopicRole::kConfidence:
-        set.confidence[role.input] = messages[j].image;
-        break;
-    }
-  }
-  // An input that takes a confidence is present only with it.
-  for (int i = 0; i < num_inputs; ++i) {
-    if (wants_confidence[i] && !set.confidence[i]) set.normals[i].reset();
-    if (!set.normals[i]) set.confidence[i].reset();
-  }
-  return set;
-}
-
 NormalFusionNodelet::~NormalFusionNodelet() {
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
@@ -203,39 +152,10 @@ void NormalFusionNodelet::onInit() {
   queue_size_ = settings_.queue_size;
 
   roles_ = topicRoles(settings_);
-  TopicNames names;
-  std::vector<bool> required;
-  for (TopicRole& role : roles_) {
-    role.name = nh.resolveName(role.name);
-    switch (role.kind) {
-      case TopicRole::kImage:
-        names.image = role.name;
-        required.push_back(true);
-        break;
-      case TopicRole::kCameraInfo:
-        names.camera_info = role.name;
-        required.push_back(true);
-        break;
-      case TopicRole::kNormals:
-        names.normals.push_back(role.name);
-        required.push_back(!settings_.inputs[role.input].optional);
-        break;
-      case TopicRole::kConfidence:
-        required.push_back(!settings_.inputs[role.input].optional);
-        break;
-    }
-  }
-  names.confidence.resize(settings_.num_inputs);
-  for (const TopicRole& role : roles_) {
-    if (role.kind == TopicRole::kConfidence) {
-      names.confidence[role.input] = role.name;
-    }
-  }
-  for (int i = 0; i < settings_.num_inputs; ++i) {
-    if (names.confidence[i].empty()) {
-      names.confidence[i] = nh.resolveName("confidence_" + std::to_string(i));
-    }
-  }
+  for (TopicRole& role : roles_) role.name = nh.resolveName(role.name);
+  TopicNames names = topicNamesOf(roles_, settings_.num_inputs);
+  for (std::string& name : names.confidence) name = nh.resolveName(name);
+  const std::vector<bool> required = requiredTopics(roles_, settings_);
   pipeline_ = std::make_unique<FusionPipeline>(settings_, names);
   sync_ = std::make_unique<Synchronizer>(required, syncOptions(settings_));
   last_arrival_.assign(roles_.size(), ros::WallTime());
@@ -377,11 +297,7 @@ void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
                                     const QueuedMessage& message) {
   const TopicRole& role = roles_[topic];
   try {
-    if (header.stamp.isZero()) {
-      throw InputError(role.name +
-                       ": the stamp is zero; expected the capture time");
-    }
-    if (message.image) checkImageLayout(*message.image, role.name);
+    precheckMessage(role.name, header, message.image.get());
   } catch (const Error& e) {
     ++frames_skipped_;
     recordError(e.what());

@@ -38,7 +38,7 @@ template <typename Visitor>
 void visitParameters(NodeSettings& s, Visitor& v) {
   SolverSettings& solver = s.solver;
   // Model.
-  v.real("lambda", solver.lambda, 0.0, kInf);
+  v.positive("lambda", solver.lambda);  // 0 would ignore every input
   v.real("huber_eps", solver.huber_eps, 0.0, kInf);
   v.choice("penalty", solver.penalty, parseDataPenalty);
   v.choice("visibility", solver.visibility, parseVisibilityMode);
@@ -141,6 +141,31 @@ class Reader {
           it, clamped,
           "out of range [" + numberText(lo) + ", " + numberText(hi) + "]",
           &field);
+    }
+    field = value;
+    it->second = value;
+  }
+
+  /// A finite number that must be > 0: anything else gets the default.
+  void positive(const char* name, double& field) {
+    seen_.insert(name);
+    auto it = params_.find(name);
+    if (it == params_.end()) {
+      params_[name] = field;
+      return;
+    }
+    double value;
+    if (const double* d = std::get_if<double>(&it->second)) {
+      value = *d;
+    } else if (const int* n = std::get_if<int>(&it->second)) {
+      value = *n;
+    } else {
+      return replace(
+          it, field,
+          "expected a number > 0, got a " + std::string(typeName(it->second)));
+    }
+    if (!(value > 0.0) || !std::isfinite(value)) {
+      return replace(it, field, "expected a finite number > 0");
     }
     field = value;
     it->second = value;
@@ -284,6 +309,7 @@ class Writer {
   void integer(const char* name, int& field, int, int) {
     params_[name] = field;
   }
+  void positive(const char* name, double& field) { params_[name] = field; }
   void flag(const char* name, bool& field) { params_[name] = field; }
   void text(const char* name, std::string& field) { params_[name] = field; }
   template <typename Enum, typename Parse>
@@ -383,49 +409,30 @@ ParameterMap parametersFromYamlFile(const std::string& path,
       }
       continue;
     }
-    const std::string text = node.Scalar();
-    if (node.Tag() == "!") {  // quoted: always a string
-      params[name] = text;
-      continue;
-    }
-    std::string lower = text;
-    std::transform(lower.begin(), lower.end(), lower.begin(),
-                   [](unsigned char c) { return std::tolower(c); });
-    if (lower == "true" || lower == "yes" || lower == "on") {
-      params[name] = true;
-      continue;
-    }
-    if (lower == "false" || lower == "no" || lower == "off") {
-      params[name] = false;
-      continue;
-    }
-    char* end = nullptr;
-    const long long as_int = std::strtoll(text.c_str(), &end, 10);
-    if (!text.empty() && end != nullptr && *end == '\0' &&
-        as_int >= std::numeric_limits<int>::min() && as_int <= kIntMax) {
-      params[name] = static_cast<int>(as_int);
-      continue;
-    }
-    if (lower == ".inf" || lower == "+.inf") {
-      params[name] = kInf;
-      continue;
-    }
-    if (lower == "-.inf") {
-      params[name] = -kInf;
-      continue;
-    }
-    if (lower == ".nan") {
-      params[name] = std::numeric_limits<double>::quiet_NaN();
-      continue;
-    }
-    const double as_double = std::strtod(text.c_str(), &end);
-    if (!text.empty() && end != nullptr && *end == '\0') {
-      params[name] = as_double;
-      continue;
-    }
-    params[name] = text;
+    params[name] = parameterFromText(node.Scalar(), node.Tag() == "!");
   }
   return params;
+}
+
+ParameterValue parameterFromText(const std::string& text, bool quoted) {
+  if (quoted) return text;
+  std::string lower = text;
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (lower == "true" || lower == "yes" || lower == "on") return true;
+  if (lower == "false" || lower == "no" || lower == "off") return false;
+  char* end = nullptr;
+  const long long as_int = std::strtoll(text.c_str(), &end, 10);
+  if (!text.empty() && end != nullptr && *end == '\0' &&
+      as_int >= std::numeric_limits<int>::min() && as_int <= kIntMax) {
+    return static_cast<int>(as_int);
+  }
+  if (lower == ".inf" || lower == "+.inf") return kInf;
+  if (lower == "-.inf") return -kInf;
+  if (lower == ".nan") return std::numeric_limits<double>::quiet_NaN();
+  const double as_double = std::strtod(text.c_str(), &end);
+  if (!text.empty() && end != nullptr && *end == '\0') return as_double;
+  return text;
 }
 
 std::string toString(Resampling value) {

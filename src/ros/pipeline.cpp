@@ -23,6 +23,95 @@ TopicNames TopicNames::defaults(int num_inputs) {
   return names;
 }
 
+std::vector<TopicRole> topicRoles(const NodeSettings& settings) {
+  std::vector<TopicRole> roles;
+  roles.push_back({TopicRole::kImage, -1, "image"});
+  roles.push_back({TopicRole::kCameraInfo, -1, "camera_info"});
+  for (int i = 0; i < settings.num_inputs; ++i) {
+    roles.push_back({TopicRole::kNormals, i, "normals_" + std::to_string(i)});
+  }
+  for (int i = 0; i < settings.num_inputs; ++i) {
+    if (settings.inputs[i].use_confidence) {
+      roles.push_back(
+          {TopicRole::kConfidence, i, "confidence_" + std::to_string(i)});
+    }
+  }
+  return roles;
+}
+
+InputSet inputSetFrom(const std::vector<TopicRole>& roles,
+                      const std::vector<QueuedMessage>& messages,
+                      const std::vector<bool>& present, int num_inputs) {
+  InputSet set;
+  set.normals.resize(num_inputs);
+  set.confidence.resize(num_inputs);
+  std::vector<bool> wants_confidence(num_inputs, false);
+  for (std::size_t j = 0; j < roles.size(); ++j) {
+    const TopicRole& role = roles[j];
+    if (role.kind == TopicRole::kConfidence)
+      wants_confidence[role.input] = true;
+    if (!present[j]) continue;
+    switch (role.kind) {
+      case TopicRole::kImage:
+        set.image = messages[j].image;
+        break;
+      case TopicRole::kCameraInfo:
+        set.camera_info = messages[j].info;
+        break;
+      case TopicRole::kNormals:
+        set.normals[role.input] = messages[j].image;
+        break;
+      case TopicRole::kConfidence:
+        set.confidence[role.input] = messages[j].image;
+        break;
+    }
+  }
+  // An input that takes a confidence is present only with it.
+  for (int i = 0; i < num_inputs; ++i) {
+    if (wants_confidence[i] && !set.confidence[i]) set.normals[i].reset();
+    if (!set.normals[i]) set.confidence[i].reset();
+  }
+  return set;
+}
+
+std::vector<bool> requiredTopics(const std::vector<TopicRole>& roles,
+                                 const NodeSettings& settings) {
+  std::vector<bool> required;
+  for (const TopicRole& role : roles) {
+    required.push_back(role.input < 0 || !settings.inputs[role.input].optional);
+  }
+  return required;
+}
+
+TopicNames topicNamesOf(const std::vector<TopicRole>& roles, int num_inputs) {
+  TopicNames names = TopicNames::defaults(num_inputs);
+  for (const TopicRole& role : roles) {
+    switch (role.kind) {
+      case TopicRole::kImage:
+        names.image = role.name;
+        break;
+      case TopicRole::kCameraInfo:
+        names.camera_info = role.name;
+        break;
+      case TopicRole::kNormals:
+        names.normals[role.input] = role.name;
+        break;
+      case TopicRole::kConfidence:
+        names.confidence[role.input] = role.name;
+        break;
+    }
+  }
+  return names;
+}
+
+void precheckMessage(const std::string& topic, const std_msgs::Header& header,
+                     const sensor_msgs::Image* image) {
+  if (header.stamp.isZero()) {
+    throw InputError(topic + ": the stamp is zero; expected the capture time");
+  }
+  if (image != nullptr) checkImageLayout(*image, topic);
+}
+
 RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
                                         const std::string& fixed_frame) {
   return [&buffer, fixed_frame](

@@ -97,8 +97,8 @@ TEST(Parameters, InvalidValuesAreCorrectedWithAWarningNamingThem) {
   std::vector<std::string> warnings;
   const NodeSettings s = settingsFromParameters(params, &warnings);
   const NodeSettings defaults;
-  EXPECT_EQ(s.solver.lambda, 0.0);
-  EXPECT_EQ(std::get<double>(params["lambda"]), 0.0);
+  EXPECT_EQ(s.solver.lambda, defaults.solver.lambda);  // > 0 required
+  EXPECT_EQ(std::get<double>(params["lambda"]), defaults.solver.lambda);
   EXPECT_EQ(s.solver.edges.w_min, 1.0);
   EXPECT_EQ(s.solver.inner_iterations, 3);  // rounded
   EXPECT_EQ(s.solver.max_outer_iterations,

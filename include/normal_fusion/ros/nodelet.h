@@ -33,28 +33,6 @@
 namespace normal_fusion {
 namespace node {
 
-/// What the synchronizer queues per topic: an image or a camera_info.
-struct QueuedMessage {
-  sensor_msgs::ImageConstPtr image;
-  sensor_msgs::CameraInfoConstPtr info;
-};
-
-/// Which input a synchronizer topic is.
-struct TopicRole {
-  enum Kind { kImage, kCameraInfo, kNormals, kConfidence } kind;
-  int input = -1;    ///< normals / confidence: the input index
-  std::string name;  ///< resolved topic name
-};
-
-/// The synchronizer topics for the settings: image, camera_info, normals_i,
-/// then confidence_i of the inputs that use one. Names are relative.
-std::vector<TopicRole> topicRoles(const NodeSettings& settings);
-
-/// Builds the pipeline's input set from a synchronized set.
-InputSet inputSetFrom(const std::vector<TopicRole>& roles,
-                      const std::vector<QueuedMessage>& messages,
-                      const std::vector<bool>& present, int num_inputs);
-
 class NormalFusionNodelet : public nodelet::Nodelet {
  public:
   NormalFusionNodelet() = default;

@@ -91,6 +91,11 @@ NodeSettings settingsFromParameters(ParameterMap& params,
 ParameterMap parametersFromYamlFile(const std::string& path,
                                     std::vector<std::string>* warnings);
 
+/// A scalar typed as YAML (and rosparam) types it: true / false (also yes,
+/// no, on, off), integers, floating-point numbers (also .inf, .nan), else a
+/// string; `quoted` text is always a string.
+ParameterValue parameterFromText(const std::string& text, bool quoted = false);
+
 std::string toString(Resampling value);
 /// "nearest" or "bilinear"; throws ParameterError otherwise.
 Resampling parseResampling(const std::string& name);

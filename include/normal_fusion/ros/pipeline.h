@@ -41,6 +41,43 @@ struct InputSet {
   std::vector<sensor_msgs::ImageConstPtr> confidence;
 };
 
+/// What the synchronizer queues per topic: an image or a camera_info.
+struct QueuedMessage {
+  sensor_msgs::ImageConstPtr image;
+  sensor_msgs::CameraInfoConstPtr info;
+};
+
+/// Which input a synchronizer topic is.
+struct TopicRole {
+  enum Kind { kImage, kCameraInfo, kNormals, kConfidence } kind;
+  int input = -1;    ///< normals / confidence: the input index
+  std::string name;  ///< resolved topic name
+};
+
+/// The synchronizer topics for the settings: image, camera_info, normals_i,
+/// then confidence_i of the inputs that use one. Names are relative.
+std::vector<TopicRole> topicRoles(const NodeSettings& settings);
+
+/// Which topics a set needs: image, camera_info and the inputs (with their
+/// confidence) that are not optional.
+std::vector<bool> requiredTopics(const std::vector<TopicRole>& roles,
+                                 const NodeSettings& settings);
+
+/// The roles' names as the pipeline reports them (confidence topics of
+/// inputs without one get the default name).
+TopicNames topicNamesOf(const std::vector<TopicRole>& roles, int num_inputs);
+
+/// The checks a message gets on arrival, before it may join a set: a non-zero
+/// stamp and, for images, a layout that matches the buffer. Throws InputError
+/// naming the topic.
+void precheckMessage(const std::string& topic, const std_msgs::Header& header,
+                     const sensor_msgs::Image* image);
+
+/// Builds the pipeline's input set from a synchronized set.
+InputSet inputSetFrom(const std::vector<TopicRole>& roles,
+                      const std::vector<QueuedMessage>& messages,
+                      const std::vector<bool>& present, int num_inputs);
+
 /// Looks up the rotation R_cur_prev of the camera frame `frame` between the
 /// stamps `previous` and `current` (X_cur = R_cur_prev X_prev, row-major).
 /// Returns false with a reason when it is not known.

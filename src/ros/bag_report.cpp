@@ -1,0 +1,352 @@
+// bag_report: pictures and a summary of a fused bag, for the demo.
+//
+//   bag_report --input IN.bag --fused OUT.bag --dir DIR [--offline OFF.bag]
+//              [--ground-truth GT.bag] [--title TEXT]
+//
+// For every fused frame it writes DIR/frames/frame_NNN.png: the image, the
+// inputs /normals_0 and /normals_1 (colour-coded, lower resolutions shown
+// with nearest-neighbour pixels) and the fused map, side by side.
+// DIR/summary.md gets the per-frame statistics of /fusion_stats, their totals,
+// a roughness measure of every map (mean angle between neighbouring normals),
+// the agreement with an offline run (fuse_bag) and, when ground truth is given,
+// the PSNR and mean angular error of inputs and output.
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/Image.h>
+#include <sys/stat.h>
+
+#include <normal_fusion/FusionStats.h>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <numeric>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/metrics.h"
+#include "normal_fusion/ros/conversions.h"
+
+namespace nf = normal_fusion;
+namespace nn = normal_fusion::node;
+
+namespace {
+
+const char* const kUsage =
+    "usage: bag_report --input IN.bag --fused OUT.bag --dir DIR\n"
+    "                  [--offline OFF.bag] [--ground-truth GT.bag] "
+    "[--title TEXT]\n";
+
+using Stamped = std::map<ros::Time, sensor_msgs::ImageConstPtr>;
+
+Stamped readImages(const std::string& path, const std::string& topic) {
+  Stamped out;
+  rosbag::Bag bag(path, rosbag::bagmode::Read);
+  rosbag::View view(bag, rosbag::TopicQuery(topic));
+  for (const rosbag::MessageInstance& m : view) {
+    if (auto msg = m.instantiate<sensor_msgs::Image>()) {
+      out[msg->header.stamp] = msg;
+    }
+  }
+  return out;
+}
+
+std::map<ros::Time, normal_fusion::FusionStatsConstPtr> readStats(
+    const std::string& path) {
+  std::map<ros::Time, normal_fusion::FusionStatsConstPtr> out;
+  rosbag::Bag bag(path, rosbag::bagmode::Read);
+  rosbag::View view(bag, rosbag::TopicQuery("/fusion_stats"));
+  for (const rosbag::MessageInstance& m : view) {
+    if (auto msg = m.instantiate<normal_fusion::FusionStats>()) {
+      out[msg->header.stamp] = msg;
+    }
+  }
+  return out;
+}
+
+nf::NormalMap normalsOf(const sensor_msgs::Image& msg) {
+  nf::NormalMap normals;
+  nn::normalsFromMessage(msg, "map", 0.5, normals);
+  return normals;
+}
+
+/// Colour coding as a BGR picture (for OpenCV), black where missing.
+cv::Mat picture(const nf::NormalMap& normals, int width, int height) {
+  cv::Mat rgb(normals.height(), normals.width(), CV_8UC3);
+  for (int y = 0; y < normals.height(); ++y) {
+    for (int x = 0; x < normals.width(); ++x) {
+      const float n[3] = {normals.at(0, y, x), normals.at(1, y, x),
+                          normals.at(2, y, x)};
+      cv::Vec3b& p = rgb.at<cv::Vec3b>(y, x);
+      const bool ok = nf::isValidNormal(n[0], n[1], n[2]);
+      for (int c = 0; c < 3; ++c) {
+        // c = (n + 1) / 2 * 255, x -> R, y -> G, z -> B (stored as BGR).
+        p[2 - c] = ok ? static_cast<std::uint8_t>(std::lround(std::min(
+                            std::max((n[c] + 1.0f) * 127.5f, 0.0f), 255.0f)))
+                      : 0;
+      }
+    }
+  }
+  cv::Mat resized;
+  cv::resize(rgb, resized, cv::Size(width, height), 0, 0, cv::INTER_NEAREST);
+  return resized;
+}
+
+cv::Mat imagePicture(const sensor_msgs::Image& msg) {
+  nf::ColorImage image;
+  nn::imageFromMessage(msg, "image", image);
+  cv::Mat out(image.height(), image.width(), CV_8UC3);
+  for (int y = 0; y < image.height(); ++y) {
+    for (int x = 0; x < image.width(); ++x) {
+      for (int c = 0; c < 3; ++c) {
+        const int plane = image.channels() == 1 ? 0 : c;
+        out.at<cv::Vec3b>(y, x)[2 - c] = static_cast<std::uint8_t>(
+            std::lround(255.0f * image.at(plane, y, x)));
+      }
+    }
+  }
+  return out;
+}
+
+cv::Mat labelled(const cv::Mat& image, const std::string& label) {
+  cv::Mat out = image.clone();
+  const double scale = std::max(0.4, image.cols / 640.0 * 0.7);
+  cv::putText(out, label, cv::Point(6, static_cast<int>(22 * scale) + 4),
+              cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255, 255, 255), 2);
+  return out;
+}
+
+/// Mean angle in degrees between each valid normal and its valid right and
+/// lower neighbours: how rough a map is.
+double roughnessDeg(const nf::NormalMap& n) {
+  double sum = 0.0;
+  long count = 0;
+  for (int y = 0; y + 1 < n.height(); ++y) {
+    for (int x = 0; x + 1 < n.width(); ++x) {
+      const float a[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
+      if (!nf::isValidNormal(a[0], a[1], a[2])) continue;
+      for (int k = 0; k < 2; ++k) {
+        const int xx = x + (k == 0), yy = y + (k == 1);
+        const float b[3] = {n.at(0, yy, xx), n.at(1, yy, xx), n.at(2, yy, xx)};
+        if (!nf::isValidNormal(b[0], b[1], b[2])) continue;
+        const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+        sum += std::acos(std::min(1.0, std::max(-1.0, dot / (la * lb))));
+        ++count;
+      }
+    }
+  }
+  return count > 0 ? sum / count * 180.0 / M_PI : 0.0;
+}
+
+double validShare(const nf::NormalMap& n) {
+  long valid = 0;
+  for (std::size_t i = 0; i < n.pixelCount(); ++i) {
+    valid += nf::isValidNormal(n.plane(0)[i], n.plane(1)[i], n.plane(2)[i]);
+  }
+  return static_cast<double>(valid) / n.pixelCount();
+}
+
+double mean(const std::vector<double>& v) {
+  return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string input, fused_path, dir, offline, ground_truth,
+      title = "normal_fusion demo";
+  for (int i = 1; i < argc; ++i) {
+    const std::string key = argv[i];
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "bag_report: %s needs a value\n%s", key.c_str(),
+                   kUsage);
+      return 2;
+    }
+    const std::string value = argv[++i];
+    if (key == "--input") {
+      input = value;
+    } else if (key == "--fused") {
+      fused_path = value;
+    } else if (key == "--dir") {
+      dir = value;
+    } else if (key == "--offline") {
+      offline = value;
+    } else if (key == "--ground-truth") {
+      ground_truth = value;
+    } else if (key == "--title") {
+      title = value;
+    } else {
+      std::fprintf(stderr, "bag_report: unknown option %s\n%s", key.c_str(),
+                   kUsage);
+      return 2;
+    }
+  }
+  if (input.empty() || fused_path.empty() || dir.empty()) {
+    std::fputs(kUsage, stderr);
+    return 2;
+  }
+  ros::Time::init();
+  try {
+    const Stamped images = readImages(input, "/image");
+    const Stamped normals0 = readImages(input, "/normals_0");
+    const Stamped normals1 = readImages(input, "/normals_1");
+    const Stamped fused = readImages(fused_path, "/fused_normals");
+    const auto stats = readStats(fused_path);
+    const Stamped fused_offline =
+        offline.empty() ? Stamped() : readImages(offline, "/fused_normals");
+    const Stamped gt = ground_truth.empty()
+                           ? Stamped()
+                           : readImages(ground_truth, "/normals_gt");
+    mkdir(dir.c_str(), 0755);
+    mkdir((dir + "/frames").c_str(), 0755);
+
+    std::ostringstream table;
+    table << "| frame | stamp (s) | inputs | outer | inner | warm | solve (ms) "
+             "| latency (ms) | E start | E end | dropped so far |\n"
+          << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    std::vector<double> rough_in0, rough_in1, rough_out, solve, latency, inner,
+        offline_diff, psnr_in0, psnr_in1, psnr_out, angle_in0, angle_in1,
+        angle_out;
+    double valid0 = 0, valid1 = 0;
+    int index = 0, warm = 0;
+    std::uint64_t dropped = 0, skipped = 0;
+    for (const auto& [stamp, fused_msg] : fused) {
+      const nf::NormalMap out = normalsOf(*fused_msg);
+      const auto st = stats.count(stamp) ? stats.at(stamp) : nullptr;
+      const int W = out.width(), H = out.height();
+      std::vector<cv::Mat> tiles;
+      if (images.count(stamp)) {
+        tiles.push_back(labelled(imagePicture(*images.at(stamp)), "image"));
+      }
+      nf::NormalMap in0, in1;
+      if (normals0.count(stamp)) {
+        in0 = normalsOf(*normals0.at(stamp));
+        tiles.push_back(labelled(picture(in0, W, H), "normals_0 (fine)"));
+        rough_in0.push_back(roughnessDeg(in0));
+        valid0 += validShare(in0);
+      }
+      if (normals1.count(stamp)) {
+        in1 = normalsOf(*normals1.at(stamp));
+        tiles.push_back(labelled(picture(in1, W, H), "normals_1 (coarse)"));
+        rough_in1.push_back(roughnessDeg(in1));
+        valid1 += validShare(in1);
+      }
+      tiles.push_back(labelled(picture(out, W, H), "fused"));
+      rough_out.push_back(roughnessDeg(out));
+      cv::Mat row;
+      cv::hconcat(tiles, row);
+      char name[64];
+      std::snprintf(name, sizeof(name), "/frames/frame_%03d.png", index);
+      cv::imwrite(dir + name, row);
+      if (index == 0) cv::imwrite(dir + "/first_frame.png", row);
+
+      if (fused_offline.count(stamp)) {
+        const nf::NormalMap other = normalsOf(*fused_offline.at(stamp));
+        double worst = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          for (std::size_t i = 0; i < out.pixelCount(); ++i) {
+            worst = std::max(worst, static_cast<double>(std::abs(
+                                        out.plane(c)[i] - other.plane(c)[i])));
+          }
+        }
+        offline_diff.push_back(worst);
+      }
+      if (gt.count(stamp)) {
+        const nf::NormalMap truth = normalsOf(*gt.at(stamp));
+        psnr_out.push_back(nf::psnr(out, truth));
+        angle_out.push_back(nf::angularError(out, truth).mean_deg);
+        if (!in0.empty() && in0.sameSize(truth)) {
+          psnr_in0.push_back(nf::psnr(in0, truth));
+          angle_in0.push_back(nf::angularError(in0, truth).mean_deg);
+        }
+      }
+      table << "| " << index << " | " << stamp.toSec() << " | ";
+      if (st) {
+        std::string present;
+        for (std::size_t i = 0; i < st->inputs_present.size(); ++i) {
+          present += st->inputs_present[i] ? std::to_string(i) : "-";
+        }
+        table << present << " | " << st->outer_iterations << " | "
+              << st->inner_iterations + st->coarse_inner_iterations << " | "
+              << (st->warm_started ? "yes" : "no") << " | "
+              << 1e3 * st->solve_time << " | " << 1e3 * st->latency << " | "
+              << st->initial_energy << " | " << st->final_energy << " | "
+              << st->frames_dropped << " |\n";
+        solve.push_back(st->solve_time);
+        latency.push_back(st->latency);
+        inner.push_back(st->inner_iterations + st->coarse_inner_iterations);
+        warm += st->warm_started;
+        dropped = std::max<std::uint64_t>(dropped, st->frames_dropped);
+        skipped = std::max<std::uint64_t>(skipped, st->frames_skipped);
+      } else {
+        table << "(no stats) | | | | | | | | |\n";
+      }
+      ++index;
+    }
+    const int frames = index;
+    std::ofstream md(dir + "/summary.md");
+    md << "# " << title << "\n\n";
+    md << "- input bag: `" << input << "` (" << images.size() << " images, "
+       << normals0.size() << " maps on /normals_0, " << normals1.size()
+       << " on /normals_1)\n";
+    md << "- fused by the nodelet (bag.launch): `" << fused_path
+       << "`: " << frames << " fused frames, " << warm << " warm-started, "
+       << dropped << " dropped (worker busy), " << skipped
+       << " skipped (bad input)\n";
+    md << "- solve time per frame: mean " << 1e3 * mean(solve)
+       << " ms; latency (set complete -> outputs ready): mean "
+       << 1e3 * mean(latency) << " ms; inner iterations per frame: mean "
+       << mean(inner) << "\n";
+    if (!offline.empty()) {
+      md << "- the same bag through `fuse_bag` (`" << offline
+         << "`): " << fused_offline.size() << " frames; " << offline_diff.size()
+         << " frames in both; largest difference of a normal component: "
+         << (offline_diff.empty()
+                 ? 0.0
+                 : *std::max_element(offline_diff.begin(), offline_diff.end()))
+         << "\n";
+    }
+    md << "\n## Maps\n\n"
+       << "Roughness = mean angle between neighbouring normals (degrees; "
+          "lower is smoother); valid = share of pixels with a normal.\n\n"
+       << "| map | roughness (deg) | valid |\n|---|---|---|\n";
+    if (!rough_in0.empty()) {
+      md << "| normals_0 (fine, noisy) | " << mean(rough_in0) << " | "
+         << valid0 / rough_in0.size() << " |\n";
+    }
+    if (!rough_in1.empty()) {
+      md << "| normals_1 (coarse, smooth; its own resolution) | "
+         << mean(rough_in1) << " | " << valid1 / rough_in1.size() << " |\n";
+    }
+    md << "| fused | " << mean(rough_out) << " | 1 |\n";
+    if (!psnr_out.empty()) {
+      md << "\n## Accuracy against the ground truth\n\n"
+         << "| map | PSNR (dB) | mean angular error (deg) |\n|---|---|---|\n";
+      if (!psnr_in0.empty()) {
+        md << "| normals_0 | " << mean(psnr_in0) << " | " << mean(angle_in0)
+           << " |\n";
+      }
+      md << "| fused | " << mean(psnr_out) << " | " << mean(angle_out)
+         << " |\n";
+    }
+    md << "\n## Pictures\n\n"
+       << "`frames/frame_NNN.png`: image, normals_0, normals_1 (upsampled "
+          "for display), fused; colour c = (n + 1) / 2 * 255 with x -> R, "
+          "y -> G, z -> B, black = missing.\n\n"
+       << "![first frame](first_frame.png)\n";
+    md << "\n## Per frame\n\n" << table.str();
+    std::printf("bag_report: %d frames -> %s/summary.md, %s/frames/\n", frames,
+                dir.c_str(), dir.c_str());
+    return frames > 0 ? 0 : 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bag_report: %s\n", e.what());
+    return 1;
+  }
+}
