@@ -329,10 +329,10 @@ int synthetic(const std::string& output, const std::string& gt_output,
     const nf::synthetic::Frame& frame = sequence[k];
     // Fine: normals of a noisy, quantized depth map.
     const nf::NormalMap fine =
-        nf::synthetic::normalsFromNoisyDepth(frame, 0.01, 0.02, 100 + k);
+        nf::synthetic::normalsFromNoisyDepth(frame, 0.0015, 0.02, 100 + k);
     // Coarse: the same kind of depth, pooled 4x4 and smoothed.
     const nf::ScalarMap noisy_depth = nf::synthetic::addDepthNoise(
-        frame.depth, 0.01, nf::synthetic::kDepthQuantizationM, 0.02, 200 + k);
+        frame.depth, 0.0015, nf::synthetic::kDepthQuantizationM, 0.02, 200 + k);
     const double s = 1.0 / kCoarseFactor;
     const nf::NormalMap coarse = nf::synthetic::normalsFromDepth(
         smoothDepth(poolDepth(noisy_depth, kCoarseFactor)),

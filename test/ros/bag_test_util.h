@@ -3,6 +3,7 @@
 
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <cstdlib>
 #include <map>
@@ -15,8 +16,10 @@ namespace test {
 
 /// Writes `frames` frames of a slowly moving synthetic room, 96x72 at 10 Hz
 /// from stamp 50 s: /image (rgb8), /camera_info, /normals_0 (paper noise,
-/// full size), /normals_1 (normals of a noisy depth map, half size).
-inline void writeSyntheticBag(const std::string& path, int frames) {
+/// full size), /normals_1 (normals of a noisy depth map, half size); with
+/// `with_tf`, the camera's pose on /tf (world -> camera).
+inline void writeSyntheticBag(const std::string& path, int frames,
+                              bool with_tf = false) {
   const auto sequence = synthetic::renderSequence(0, 96, 72, frames, 0.5, 10.0);
   rosbag::Bag bag(path, rosbag::bagmode::Write);
   for (int k = 0; k < frames; ++k) {
@@ -31,6 +34,11 @@ inline void writeSyntheticBag(const std::string& path, int frames) {
     bag.write("/normals_0", header.stamp, *normalsMessage(f.noisy, header));
     bag.write("/normals_1", header.stamp, *normalsMessage(half_noisy, header));
     bag.write("/image", header.stamp, *imageMessage(frame.image, header));
+    if (with_tf) {
+      tf2_msgs::TFMessage tf;
+      tf.transforms.push_back(cameraInWorld(frame.pose, header.stamp.toSec()));
+      bag.write("/tf", header.stamp, tf);
+    }
   }
   bag.close();
 }

@@ -1,8 +1,12 @@
 // Message builders for the ROS tests: synthetic frames as sensor_msgs.
 #pragma once
 
+#include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+
+#include <tf2/LinearMath/Matrix3x3.h>
+#include <tf2/LinearMath/Quaternion.h>
 
 #include <boost/make_shared.hpp>
 #include <cmath>
@@ -111,6 +115,30 @@ inline NoisyFrame noisyFrame(const synthetic::Frame& frame,
   out.noisy = synthetic::addPaperNoise(frame.normals_gt, 0.4, seed);
   out.from_depth = synthetic::normalsFromNoisyDepth(frame, 0.01, 0.02, seed);
   return out;
+}
+
+/// A tf message world -> camera for a synthetic pose (X_cam = R X_world + t):
+/// the transform takes camera points into the world, rotation R^T,
+/// translation -R^T t.
+inline geometry_msgs::TransformStamped cameraInWorld(
+    const synthetic::Pose& pose, double stamp) {
+  const auto& R = pose.R_cam_world;
+  tf2::Matrix3x3 Rt(R[0], R[3], R[6], R[1], R[4], R[7], R[2], R[5], R[8]);
+  tf2::Quaternion q;
+  Rt.getRotation(q);
+  geometry_msgs::TransformStamped t;
+  t.header.stamp = ros::Time(stamp);
+  t.header.frame_id = "world";
+  t.child_frame_id = "camera";
+  t.transform.rotation.x = q.x();
+  t.transform.rotation.y = q.y();
+  t.transform.rotation.z = q.z();
+  t.transform.rotation.w = q.w();
+  const auto& tr = pose.t_cam_world;
+  t.transform.translation.x = -(R[0] * tr[0] + R[3] * tr[1] + R[6] * tr[2]);
+  t.transform.translation.y = -(R[1] * tr[0] + R[4] * tr[1] + R[7] * tr[2]);
+  t.transform.translation.z = -(R[2] * tr[0] + R[5] * tr[1] + R[8] * tr[2]);
+  return t;
 }
 
 }  // namespace test

@@ -92,6 +92,36 @@ TEST(FuseBag, ParametersFromTheFileAndTheCommandLine) {
   std::system(("rm -rf " + dir).c_str());
 }
 
+TEST(FuseBag, RotationCompensatedWarmStartFromTheBagsTf) {
+  const std::string dir = tempDir();
+  nf::test::writeSyntheticBag(dir + "/in.bag", 3, true);
+  const ToolRun r = run("--input " + dir + "/in.bag --output " + dir +
+                        "/out.bag --num-inputs 2 --set fixed_frame=world "
+                        "--set num_threads=2 --no-vis");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("3 transforms from /tf"), std::string::npos)
+      << r.output;
+  const auto stats =
+      nf::test::readTopic<nf::FusionStats>(dir + "/out.bag", "/fusion_stats");
+  ASSERT_EQ(stats.size(), 3u);
+  int compensated = 0;
+  for (const auto& entry : stats) {
+    compensated += entry.second->rotation_compensated;
+    EXPECT_EQ(entry.second->rotation_compensated, entry.second->warm_started);
+  }
+  EXPECT_EQ(compensated, 2);
+  // Without the transforms: a warning, and cold starts.
+  nf::test::writeSyntheticBag(dir + "/no_tf.bag", 2);
+  const ToolRun cold = run("--input " + dir + "/no_tf.bag --output " + dir +
+                           "/out2.bag --num-inputs 2 --set fixed_frame=world");
+  ASSERT_EQ(cold.status, 0) << cold.output;
+  EXPECT_NE(cold.output.find("cold start"), std::string::npos) << cold.output;
+  EXPECT_NE(cold.output.find("frames fused:       2 (0 warm-started)"),
+            std::string::npos)
+      << cold.output;
+  std::system(("rm -rf " + dir).c_str());
+}
+
 TEST(FuseBag, FailsClearly) {
   const std::string dir = tempDir();
   nf::test::writeSyntheticBag(dir + "/in.bag", 1);

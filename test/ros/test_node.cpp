@@ -8,6 +8,7 @@
 #include <normal_fusion/FusionStats.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
+#include <tf2_ros/transform_broadcaster.h>
 
 #include <functional>
 #include <map>
@@ -417,6 +418,44 @@ TEST(Node, DynamicReconfigureTakesEffectOnTheNextFrame) {
   const auto again = client.messagesFor(sceneFrame(), newStamp());
   ASSERT_TRUE(answered(client, again));
   EXPECT_GT(client.stats(again.image->header.stamp)->inner_iterations, 3u);
+}
+
+TEST(Node, RotationCompensatedWarmStartWithTf) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const std::string service = nodeName() + "/set_parameters";
+  ASSERT_TRUE(ros::service::waitForService(service, 5000));
+  dynamic_reconfigure::Reconfigure current;
+  ASSERT_TRUE(ros::service::call(service, current));
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::StrParameter frame;
+  frame.name = "fixed_frame";
+  frame.value = "world";
+  srv.request.config.strs.push_back(frame);
+  dynamic_reconfigure::DoubleParameter timeout;
+  timeout.name = "tf_timeout";
+  timeout.value = 1.0;
+  srv.request.config.doubles.push_back(timeout);
+  ASSERT_TRUE(ros::service::call(service, srv));
+  tf2_ros::TransformBroadcaster broadcaster;
+  ros::WallDuration(0.5).sleep();  // the node's tf listener connects
+  const auto sequence =
+      nf::synthetic::renderSequence(0, kWidth, kHeight, 3, 2.0, 30.0);
+  for (std::size_t k = 0; k < sequence.size(); ++k) {
+    const double stamp = newStamp(1.0 / 30.0);
+    broadcaster.sendTransform(nf::test::cameraInWorld(sequence[k].pose, stamp));
+    const auto m =
+        client.messagesFor(nf::test::noisyFrame(sequence[k], 70 + k), stamp);
+    ASSERT_TRUE(answered(client, m)) << "frame " << k;
+    const auto stats = client.stats(m.image->header.stamp);
+    EXPECT_EQ(stats->warm_started, k > 0) << "frame " << k;
+    EXPECT_EQ(stats->rotation_compensated, k > 0) << "frame " << k;
+  }
+  dynamic_reconfigure::Reconfigure restore;
+  restore.request.config = current.response.config;
+  ASSERT_TRUE(ros::service::call(service, restore));
 }
 
 // Two nodes (the nodelet and the standalone node) fed the same frames give

@@ -12,6 +12,7 @@
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/ros/pipeline.h"
 #include "normal_fusion/ros/synchronizer.h"
+#include "normal_fusion/synthetic.h"
 #include "ros_test_util.h"
 
 namespace normal_fusion {
@@ -740,6 +741,36 @@ TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
                    failing, false, &out);
   EXPECT_FALSE(out.stats->warm_started);
   EXPECT_NE(out.warning.find("no transform"), std::string::npos);
+}
+
+TEST(Pipeline, RotationLookupInATfBufferGivesTheCameraRotation) {
+  const auto frames = synthetic::renderSequence(0, 32, 24, 2, 5.0, 10.0);
+  tf2::BufferCore buffer;
+  buffer.setTransform(test::cameraInWorld(frames[0].pose, 3.0), "test");
+  buffer.setTransform(test::cameraInWorld(frames[1].pose, 3.1), "test");
+  const RotationLookup lookup = rotationLookupFromBuffer(buffer, "world");
+  std::array<double, 9> R{};
+  std::string reason;
+  ASSERT_TRUE(lookup("camera", ros::Time(3.0), ros::Time(3.1), &R, &reason))
+      << reason;
+  // Expected R_cur_prev = R_cam1_world R_cam0_world^T.
+  const auto& P0 = frames[0].pose.R_cam_world;
+  const auto& P1 = frames[1].pose.R_cam_world;
+  double largest_entry_of_difference = 0.0, rotation_angle = 0.0;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      double expected = 0.0;
+      for (int k = 0; k < 3; ++k) expected += P1[3 * r + k] * P0[3 * c + k];
+      largest_entry_of_difference = std::max(largest_entry_of_difference,
+                                             std::abs(expected - R[3 * r + c]));
+    }
+  }
+  rotation_angle = std::acos(std::min(1.0, (R[0] + R[4] + R[8] - 1) / 2));
+  EXPECT_LT(largest_entry_of_difference, 1e-9);
+  EXPECT_GT(rotation_angle, 0.05);  // the sequence turned by 5 degrees
+  // Outside the buffer: false, with the reason.
+  EXPECT_FALSE(lookup("camera", ros::Time(1.0), ros::Time(3.1), &R, &reason));
+  EXPECT_FALSE(reason.empty());
 }
 
 TEST(Pipeline, OptionalInputMayBeAbsent) {
