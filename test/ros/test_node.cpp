@@ -3,6 +3,7 @@
 // accuracy, warm start, bad inputs, dynamic_reconfigure, missing inputs.
 // With ~compare_namespaces set, it checks instead that two nodes in those
 // namespaces (the nodelet and the standalone node) give the same outputs.
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <normal_fusion/FusionStats.h>
@@ -243,6 +244,38 @@ TEST(Node, AnswersEverySetWithItsStampAndBeatsTheInputs) {
     EXPECT_GT(p_fused, nf::psnr(f.noisy, f.frame.normals_gt)) << "frame " << k;
     EXPECT_GT(p_fused, nf::psnr(f.from_depth, f.frame.normals_gt))
         << "frame " << k;
+  }
+}
+
+TEST(Node, PublishesDiagnostics) {
+  if (compareMode()) GTEST_SKIP();
+  std::mutex mutex;
+  std::map<std::string, std::string> values;
+  std::string name;
+  ros::NodeHandle nh;
+  ros::Subscriber sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10,
+      [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const auto& status : m->status) {
+          if (status.name.find("normal_fusion") == std::string::npos) continue;
+          name = status.name;
+          for (const auto& kv : status.values) values[kv.key] = kv.value;
+        }
+      });
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        return values.count("frames processed") > 0;
+      },
+      5.0));
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_GT(std::stoi(values["frames processed"]), 0) << name;
+  for (const char* key :
+       {"output rate (Hz, last 5 s)", "mean latency (s, last 5 s)",
+        "frames dropped (worker busy)", "frames skipped (bad input)",
+        "last error"}) {
+    EXPECT_EQ(values.count(key), 1u) << key;
   }
 }
 
