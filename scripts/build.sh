@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Sets up (Debian packages) and builds normal_fusion in a catkin workspace.
-# The workspace defaults to build/ws inside the repository; NF_WS overrides it.
+# The workspace defaults to .build/ws inside the repository; NF_WS overrides it.
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-ws="${NF_WS:-$repo/build/ws}"
+ws="${NF_WS:-$repo/.build/ws}"
 jobs="${NF_JOBS:-$(nproc)}"
 
 bash "$repo/scripts/setup.sh"

@@ -5,7 +5,7 @@
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-ws="${NF_WS:-$repo/build/ws}"
+ws="${NF_WS:-$repo/.build/ws}"
 bash "$repo/scripts/build.sh" >/dev/null
 bin="$ws/devel/lib/normal_fusion"
 echo "# machine: $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores, $(uname -r)"

@@ -14,7 +14,7 @@
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-ws="${NF_WS:-$repo/build/ws}"
+ws="${NF_WS:-$repo/.build/ws}"
 out="$repo/output"
 keep_bags=0
 source_args=()

@@ -4,7 +4,7 @@
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-ws="${NF_WS:-$repo/build/ws}"
+ws="${NF_WS:-$repo/.build/ws}"
 jobs="${NF_JOBS:-$(nproc)}"
 
 bash "$repo/scripts/build.sh"

@@ -32,6 +32,9 @@ std::string sizeText(const PlanarImage& image) {
 
 /// Iterations per thread per sweep of the fast backend's temporal blocking.
 constexpr int kBlockDepth = 6;
+/// Pyramid depth chosen when pyramid_levels = 0 and more than 0.5% of the
+/// pixels have no valid observation.
+constexpr int kAutoPyramidLevels = 5;
 /// Outer steps and relative tolerance of the coarser pyramid levels.
 constexpr int kCoarseOuterSteps = 4;
 constexpr double kCoarseTolerance = 1e-3;
@@ -54,7 +57,7 @@ void prepareFinestInto(const FusionProblem& problem,
   level.num_inputs = static_cast<int>(problem.inputs.size());
   level.K = problem.K;
   level.K_inv = problem.K.inverse();
-  level.guide = &problem.image;
+  level.problem_image = &problem.image;
   computeEdgeWeightsInto(problem.image, settings.edges, level.edge_weight,
                          scratch, threads);
   level.data.resize(level.num_inputs);
@@ -143,9 +146,9 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
   coarse.K = fine.K.scaled(static_cast<double>(W) / fine.width,
                            static_cast<double>(H) / fine.height);
   coarse.K_inv = coarse.K.inverse();
-  const ColorImage& fine_image = *fine.guide;
+  const ColorImage& fine_image = fine.guide();
   coarse.image.resize(W, H, fine_image.channels());
-  coarse.guide = &coarse.image;
+  coarse.problem_image = nullptr;
   coarse.data.resize(L);
   coarse.data_weight.resize(L);
   for (int l = 0; l < L; ++l) {
@@ -502,7 +505,7 @@ class SolverImpl {
       if (wanted == 0) {
         const double missing = 1.0 - static_cast<double>(finest.valid_pixels) /
                                          (static_cast<double>(W) * H);
-        wanted = missing > 0.005 ? 5 : 1;
+        wanted = missing > 0.005 ? kAutoPyramidLevels : 1;
       }
       while (num_levels < wanted &&
              std::min(levels_[num_levels - 1].width,

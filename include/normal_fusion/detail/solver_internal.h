@@ -26,11 +26,15 @@ struct PreparedLevel {
   PlanarImage edge_weight;  ///< w_h (plane 0), w_v (plane 1)
   std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
   CameraIntrinsics K;
-  /// Guide image at this level (read to build the next coarser level): the
-  /// problem's own image at the finest level (not copied; valid during the
-  /// solve), `image` at coarser ones.
-  const ColorImage* guide = nullptr;
+  /// The problem's own image at the finest level (not copied; valid during
+  /// the solve); null at coarser levels, which own their image in `image`.
+  /// (No level points into another level, so the level vector may move.)
+  const ColorImage* problem_image = nullptr;
   ColorImage image;
+  /// Guide image at this level (read to build the next coarser level).
+  const ColorImage& guide() const {
+    return problem_image != nullptr ? *problem_image : image;
+  }
   int valid_pixels = 0;
 
   /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
