@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The main job: sets up, builds, and runs the evaluation on the synthetic scenes
+# The evaluation: sets up, builds, and runs `evaluate` on the synthetic scenes
 # (prints the accuracy table and writes it with a plot into results/).
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
