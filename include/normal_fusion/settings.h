@@ -44,11 +44,11 @@ enum class SolverBackend {
 };
 
 struct EdgeWeightSettings {
-  bool enabled = true;           ///< false: w_h = w_v = 1 (plain, unguided TV)
+  bool enabled = true;  ///< false: w_h = w_v = 1 (plain, unguided TV)
   /// Gaussian pre-smoothing of the guide in pixels (0: none). Raise it to
   /// 0.5 - 1 for guides with visible sensor noise.
   double smoothing_sigma = 0.0;
-  double alpha = 50.0;
+  double alpha = 15.0;
   double beta = 1.0;
   double w_min = 0.1;  ///< floor of the weights, in [0, 1]
   EdgeColorMode color_mode = EdgeColorMode::kColorMax;
@@ -65,6 +65,28 @@ struct SolverSettings {
   DataPenalty penalty = DataPenalty::kL2;
   VisibilityMode visibility = VisibilityMode::kSoft;
   EdgeWeightSettings edges;
+  /// Huber threshold delta(x) of the unsquared data terms (penalty l2), per
+  /// pixel and input: c huber_delta(|n - f|), quadratic below delta (Gaussian
+  /// noise is averaged), linear above (outliers pull with a bounded force);
+  /// delta = 0 is the plain unsquared L2 of the paper.
+  ///   delta(x) = data_eps + data_eps_local * s(x),
+  ///   s(x) = sqrt(2 (1 - |mean of f over the window|)): the RMS spread of
+  ///          the input around its local mean in the (2 local_radius + 1)^2
+  ///          window (0 where fewer than 2 of its pixels are valid).
+  /// Noisy regions of an input get a softer, smoothing data term, clean ones
+  /// and sparse inputs keep the robust one. Computed from the inputs before
+  /// the solve, so the energy stays convex and the outer loop monotone.
+  /// Ignored with the squared penalty.
+  double data_eps = 0.0;
+  double data_eps_local = 1.0;
+  /// Density correction of the data weights: c(x) *= (window / valid)^p, the
+  /// count of the input's valid pixels in the window around x. A sample of a
+  /// sparse input stands for the pixels around it that the input misses, so
+  /// a sparse, accurate input is not outvoted by a dense, noisy one; dense
+  /// inputs keep their weight (window = valid). 0 = off.
+  double density_power = 1.0;
+  /// Half-size of the window of s(x) and of the density, in pixels (>= 1).
+  int local_radius = 1;
 
   // Iterations and stopping.
   int inner_iterations = 50;      ///< Chambolle-Pock iterations per outer step

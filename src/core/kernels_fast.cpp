@@ -108,6 +108,30 @@ void dataDualRowL2(int n, float sigma, const float* __restrict c,
   }
 }
 
+/// q <- clamp_c((q + sigma (nbar - f)) / (1 + sigma delta / c)) (unsquared,
+/// Huber threshold delta) for one row.
+NF_MULTIVERSION
+void dataDualRowHuber(int n, float sigma, const float* __restrict c,
+                      const float* __restrict delta, const float* __restrict nx,
+                      const float* __restrict ny, const float* __restrict nz,
+                      const float* __restrict fx, const float* __restrict fy,
+                      const float* __restrict fz, float* __restrict qx,
+                      float* __restrict qy, float* __restrict qz) {
+  for (int x = 0; x < n; ++x) {
+    // c / (c + sigma delta) = 1 / (1 + sigma delta / c); 0 where c = 0 (the
+    // clamp to radius 0 zeroes q there anyway).
+    const float denom = c[x] + sigma * delta[x];
+    const float s = denom > 0.0f ? c[x] / denom : 0.0f;
+    const float ax = (qx[x] + sigma * (nx[x] - fx[x])) * s;
+    const float ay = (qy[x] + sigma * (ny[x] - fy[x])) * s;
+    const float az = (qz[x] + sigma * (nz[x] - fz[x])) * s;
+    const float sc = clampScale(ax * ax + ay * ay + az * az, c[x]);
+    qx[x] = ax * sc;
+    qy[x] = ay * sc;
+    qz[x] = az * sc;
+  }
+}
+
 /// q <- (q + sigma (nbar - f)) / (1 + sigma / c) (squared) for one row.
 NF_MULTIVERSION
 void dataDualRowSquared(int n, float sigma, const float* __restrict c,
@@ -153,7 +177,10 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
     const ConstPlanes3 f = rowOf(level.data[l], off);
     const float* c_w = level.data_weight[l].plane(0) + off;
     const Planes3 q = rowOf(s.q[l], off);
-    if (prm.penalty == DataPenalty::kL2) {
+    if (prm.penalty == DataPenalty::kL2 && level.data_huber) {
+      dataDualRowHuber(W, sigma_data, c_w, level.data_eps[l].plane(0) + off,
+                       nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x, q.y, q.z);
+    } else if (prm.penalty == DataPenalty::kL2) {
       dataDualRowL2(W, sigma_data, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x,
                     q.y, q.z);
     } else {
@@ -386,6 +413,23 @@ float dataEnergyRow(int W, bool squared, const float* __restrict nx,
   return sum;
 }
 
+/// sum c huber_delta(|n - f|) over one row (delta = 0: c |n - f|).
+NF_MULTIVERSION
+float dataHuberEnergyRow(int W, const float* __restrict nx,
+                         const float* __restrict ny, const float* __restrict nz,
+                         const float* __restrict fx, const float* __restrict fy,
+                         const float* __restrict fz, const float* __restrict c,
+                         const float* __restrict delta) {
+  float sum = 0.0f;
+  for (int x = 0; x < W; ++x) {
+    const float dx = nx[x] - fx[x], dy = ny[x] - fy[x], dz = nz[x] - fz[x];
+    const float z = std::sqrt(dx * dx + dy * dy + dz * dz);
+    const float d = delta[x];
+    sum += c[x] * (z < d ? z * z / (2.0f * d) : z - 0.5f * d);
+  }
+  return sum;
+}
+
 }  // namespace
 
 double energyFast(const PreparedLevel& level, double huber_eps,
@@ -407,6 +451,15 @@ double energyFast(const PreparedLevel& level, double huber_eps,
                   y + 1 < H ? 1.0f : 0.0f, level.edge_weight.plane(0) + off,
                   level.edge_weight.plane(1) + off, eps, inv_2eps);
     for (int l = 0; l < level.num_inputs; ++l) {
+      if (!squared && level.data_huber) {
+        row += dataHuberEnergyRow(
+            W, normals.plane(0) + off, normals.plane(1) + off,
+            normals.plane(2) + off, level.data[l].plane(0) + off,
+            level.data[l].plane(1) + off, level.data[l].plane(2) + off,
+            level.data_weight[l].plane(0) + off,
+            level.data_eps[l].plane(0) + off);
+        continue;
+      }
       row += dataEnergyRow(
           W, squared, normals.plane(0) + off, normals.plane(1) + off,
           normals.plane(2) + off, level.data[l].plane(0) + off,

@@ -84,10 +84,12 @@ void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
 }
 
 /// Dual step of one data term (prox of sigma F_l^*, F_l(z) = c phi(z - f)):
-/// unsquared: q <- clamp_c(q + sigma (nbar - f));
+/// unsquared: q <- clamp_c((q + sigma (nbar - f)) / (1 + sigma delta / c))
+///            (Huber with threshold delta; delta = 0: plain clamp);
 /// squared:   q <- (q + sigma (nbar - f)) / (1 + sigma / c).
 void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
-                  const float* c_weight, float sigma, DataPenalty penalty) {
+                  const float* c_weight, const float* delta, float sigma,
+                  DataPenalty penalty) {
   const std::size_t N = q.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
     const float c_w = c_weight[i];
@@ -96,6 +98,10 @@ void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
       v[c] = q.plane(c)[i] + sigma * (nbar.plane(c)[i] - f.plane(c)[i]);
     }
     if (penalty == DataPenalty::kL2) {
+      const float d = delta != nullptr ? delta[i] : 0.0f;
+      if (d > 0.0f && c_w > 0.0f) {
+        for (float& value : v) value /= 1.0f + sigma * d / c_w;
+      }
       clampVector(v, c_w);
     } else {
       const float s = c_w > 0.0f ? 1.0f / (1.0f + sigma / c_w) : 0.0f;
@@ -146,9 +152,10 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
     // Dual ascent on each data term: q_l <- prox(q_l + sigma (nbar - f_l)).
     s.q_sum.fill(0.0f);
     for (int l = 0; l < level.num_inputs; ++l) {
-      reference::proxDataDual(s.q[l], s.nbar, level.data[l],
-                              level.data_weight[l].plane(0), params.sigma_data,
-                              params.penalty);
+      reference::proxDataDual(
+          s.q[l], s.nbar, level.data[l], level.data_weight[l].plane(0),
+          level.data_huber ? level.data_eps[l].plane(0) : nullptr,
+          params.sigma_data, params.penalty);
       for (int c = 0; c < 3; ++c) {
         for (std::size_t i = 0; i < N; ++i) {
           s.q_sum.plane(c)[i] += s.q[l].plane(c)[i];

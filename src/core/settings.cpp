@@ -44,6 +44,10 @@ void SolverSettings::validate() const {
   requireAtLeast("edges.alpha", edges.alpha, 0.0);
   requireAtLeast("edges.beta", edges.beta, 0.0);
   requireRange("edges.w_min", edges.w_min, 0.0, 1.0);
+  requireRange("data_eps", data_eps, 0.0, 2.0);
+  requireRange("data_eps_local", data_eps_local, 0.0, 100.0);
+  requireRange("density_power", density_power, 0.0, 4.0);
+  requireRange("local_radius", local_radius, 1, 8);
   requireAtLeast("inner_iterations", inner_iterations, 1);
   requireAtLeast("max_outer_iterations", max_outer_iterations, 1);
   requireAtLeast("max_total_inner_iterations", max_total_inner_iterations, 1);

@@ -116,6 +116,70 @@ void prepareFinestInto(const FusionProblem& problem,
     }
   }
   level.valid_pixels = static_cast<int>(valid);
+  // Local statistics of each input: Huber thresholds of the data terms
+  // (unsquared penalty only) and the density correction of the weights.
+  level.data_huber = settings.penalty == DataPenalty::kL2 &&
+                     (settings.data_eps > 0.0 || settings.data_eps_local > 0.0);
+  level.data_eps.resize(level.num_inputs);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    level.data_eps[l].resize(W, H, 1);
+    applyLocalStatistics(settings, level.data[l], level.data_eps[l],
+                         level.data_weight[l], threads);
+  }
+}
+
+void applyLocalStatistics(const SolverSettings& settings,
+                          const PlanarImage& data, PlanarImage& data_eps,
+                          PlanarImage& data_weight, int threads) {
+  const int W = data.width(), H = data.height();
+  const int r = settings.local_radius;
+  const bool huber = settings.penalty == DataPenalty::kL2 &&
+                     (settings.data_eps > 0.0 || settings.data_eps_local > 0.0);
+  const bool density = settings.density_power > 0.0;
+  const float density_power = static_cast<float>(settings.density_power);
+  const float eps_global = static_cast<float>(settings.data_eps);
+  const float eps_local = static_cast<float>(settings.data_eps_local);
+  const float* fx = data.plane(0);
+  const float* fy = data.plane(1);
+  const float* fz = data.plane(2);
+  float* delta = data_eps.plane(0);
+  float* c = data_weight.plane(0);
+  if (!huber && !density) return;
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      // Resultant of the valid f(y) in the window (f = 0 where missing).
+      float sx = 0.0f, sy = 0.0f, sz = 0.0f;
+      int count = 0, window = 0;
+      for (int v = std::max(0, y - r); v <= std::min(H - 1, y + r); ++v) {
+        for (int u = std::max(0, x - r); u <= std::min(W - 1, x + r); ++u) {
+          ++window;
+          const std::size_t j = static_cast<std::size_t>(v) * W + u;
+          if (fx[j] == 0.0f && fy[j] == 0.0f && fz[j] == 0.0f) continue;
+          sx += fx[j];
+          sy += fy[j];
+          sz += fz[j];
+          ++count;
+        }
+      }
+      // s = sqrt(2 (1 - R)), R = |sum f| / count: mean |f - m|^2 = 2 (1 - R)
+      // for unit vectors around their normalized mean m.
+      float spread = 0.0f;
+      if (count >= 2) {
+        const float R = std::sqrt(sx * sx + sy * sy + sz * sz) / count;
+        spread = std::sqrt(std::max(0.0f, 2.0f * (1.0f - R)));
+      }
+      // delta(x) = data_eps + data_eps_local * s(x), at most 2 (the largest
+      // distance of unit vectors).
+      if (huber) delta[i] = std::min(2.0f, eps_global + eps_local * spread);
+      // c(x) *= (window / count)^density_power: a sample of a sparse input
+      // speaks for the pixels around it that the input misses.
+      if (density && c[i] > 0.0f && count > 0 && count < window) {
+        c[i] *= std::pow(static_cast<float>(window) / count, density_power);
+      }
+    }
+  }
 }
 
 PreparedLevel prepareFinest(const FusionProblem& problem,
@@ -151,9 +215,12 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
   coarse.problem_image = nullptr;
   coarse.data.resize(L);
   coarse.data_weight.resize(L);
+  coarse.data_eps.resize(L);
+  coarse.data_huber = fine.data_huber;
   for (int l = 0; l < L; ++l) {
     coarse.data[l].resize(W, H, 3);
     coarse.data_weight[l].resize(W, H, 1);
+    coarse.data_eps[l].resize(W, H, 1);
   }
   long valid = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : valid)
@@ -180,11 +247,14 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
       bool any_valid = false;
       for (int l = 0; l < L; ++l) {
         double f_sum[3] = {0.0, 0.0, 0.0};
-        double c_sum = 0.0;
+        double c_sum = 0.0, eps_sum = 0.0;
         for (int k = 0; k < 4; ++k) {
           if (duplicate(k)) continue;
           const float cw = fine.data_weight[l].at(0, ys[k], xs[k]);
           c_sum += cw;
+          if (fine.data_huber) {
+            eps_sum += cw * fine.data_eps[l].at(0, ys[k], xs[k]);
+          }
           for (int c = 0; c < 3; ++c)
             f_sum[c] += cw * fine.data[l].at(c, ys[k], xs[k]);
         }
@@ -197,6 +267,9 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
         }
         coarse.data_weight[l].plane(0)[j] =
             ok ? static_cast<float>(2.0 * c_sum / count) : 0.0f;
+        // delta: the weighted mean of the block's thresholds.
+        coarse.data_eps[l].plane(0)[j] =
+            ok && fine.data_huber ? static_cast<float>(eps_sum / c_sum) : 0.0f;
         any_valid = any_valid || ok;
       }
       valid += any_valid ? 1 : 0;
@@ -351,8 +424,15 @@ double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
           const double d = n[ch] - level.data[l].at(ch, y, x);
           d2 += d * d;
         }
-        row_sum +=
-            penalty == DataPenalty::kL2 ? c * std::sqrt(d2) : c * 0.5 * d2;
+        if (penalty == DataPenalty::kSquaredL2) {
+          row_sum += c * 0.5 * d2;
+          continue;
+        }
+        // c huber_delta(|n - f|); delta = 0: c |n - f|.
+        const double z = std::sqrt(d2);
+        const double delta =
+            level.data_huber ? level.data_eps[l].at(0, y, x) : 0.0;
+        row_sum += c * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
       }
       // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n).
       if (x + 1 < W) {

@@ -69,6 +69,14 @@ const std::map<std::string, Setter>& setters() {
        [](auto& o, auto& v, auto& s) {
          s.edges.gradient = parseName(o, v, parseEdgeGradient);
        }},
+      {"--data-eps",
+       [](auto& o, auto& v, auto& s) { s.data_eps = parseDouble(o, v); }},
+      {"--data-eps-local",
+       [](auto& o, auto& v, auto& s) { s.data_eps_local = parseDouble(o, v); }},
+      {"--density-power",
+       [](auto& o, auto& v, auto& s) { s.density_power = parseDouble(o, v); }},
+      {"--local-radius",
+       [](auto& o, auto& v, auto& s) { s.local_radius = parseInt(o, v); }},
       {"--inner-iterations",
        [](auto& o, auto& v, auto& s) { s.inner_iterations = parseInt(o, v); }},
       {"--max-outer", [](auto& o, auto& v,
@@ -170,6 +178,18 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << "]\n"
       << "  --edge-sigma X        Gaussian pre-smoothing of the guide, pixels ["
       << d.edges.smoothing_sigma << "]\n"
+      << "  --data-eps X          Huber threshold of the data terms, "
+         "global part ["
+      << d.data_eps << "]\n"
+      << "  --data-eps-local X    its part per unit of the input's local "
+         "spread ["
+      << d.data_eps_local << "]\n"
+      << "  --density-power X     data weight times (window / valid)^X in "
+         "the window ["
+      << d.density_power << "]\n"
+      << "  --local-radius N      window half-size of the spread and the "
+         "density ["
+      << d.local_radius << "]\n"
       << "  --inner-iterations N  Chambolle-Pock iterations per outer step ["
       << d.inner_iterations << "]\n"
       << "  --max-outer N         majorize-minimize steps ["

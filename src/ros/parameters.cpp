@@ -42,6 +42,10 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.real("huber_eps", solver.huber_eps, 0.0, kInf);
   v.choice("penalty", solver.penalty, parseDataPenalty);
   v.choice("visibility", solver.visibility, parseVisibilityMode);
+  v.real("data_eps", solver.data_eps, 0.0, 2.0);
+  v.real("data_eps_local", solver.data_eps_local, 0.0, 100.0);
+  v.real("density_power", solver.density_power, 0.0, 4.0);
+  v.integer("local_radius", solver.local_radius, 1, 8);
   // Edge weights.
   v.flag("edge_enabled", solver.edges.enabled);
   v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, kInf);

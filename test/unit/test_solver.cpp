@@ -217,6 +217,34 @@ TEST(Solver, FusingDenseNoisyWithSparseAccurateBeatsEither) {
   EXPECT_LT(mse_both, mse_sparse);
 }
 
+/// With equal input weights, the density correction keeps a sparse, accurate
+/// input from being outvoted by a dense, noisy one.
+TEST(Solver, DensityCorrectionLetsASparseAccurateInputCount) {
+  NormalMap gt;
+  FusionProblem problem = test::cylinderScene(64, 48, &gt);
+  NormalInput dense;
+  dense.normals = test::noisy(gt, 0.6, 21);
+  NormalInput sparse;
+  sparse.normals = test::noisy(gt, 0.03, 22);
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (std::size_t i = 0; i < gt.pixelCount(); ++i) {
+    if (u(rng) > 0.05f) {
+      for (int c = 0; c < 3; ++c) sparse.normals.plane(c)[i] = kNaN;
+    }
+  }
+  problem.inputs = {dense, sparse};
+  auto mse_with = [&](double density_power) {
+    SolverSettings settings;
+    settings.density_power = density_power;
+    Solver solver(settings);
+    return test::meanSquaredError(solver.solve(problem), gt);
+  };
+  const double mse_off = mse_with(0.0);
+  const double mse_on = mse_with(1.0);
+  EXPECT_LT(mse_on, 0.8 * mse_off) << "off " << mse_off << " on " << mse_on;
+}
+
 TEST(Solver, WarmStartFromConvergedStateNeedsFarFewerIterations) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
@@ -391,6 +419,18 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
   s.inner_iterations = 0;
   expect_bad(s, "inner_iterations");
   s = SolverSettings();
+  s.data_eps = std::nan("");
+  expect_bad(s, "data_eps");
+  s = SolverSettings();
+  s.data_eps_local = -0.5;
+  expect_bad(s, "data_eps_local");
+  s = SolverSettings();
+  s.density_power = 9.0;
+  expect_bad(s, "density_power");
+  s = SolverSettings();
+  s.local_radius = 0;
+  expect_bad(s, "local_radius");
+  s = SolverSettings();
   s.edges.w_min = 2.0;
   expect_bad(s, "w_min");
   s = SolverSettings();
@@ -474,13 +514,14 @@ TEST(EdgeWeights, ForwardDifferencesMarkExactlyTheLinkAcrossAnEdge) {
   EXPECT_FLOAT_EQ(w.at(0, 5, 8), 1.0f);
   EXPECT_FLOAT_EQ(w.at(0, 5, 10), 1.0f);
   EXPECT_FLOAT_EQ(w.at(1, 5, 9), 1.0f);  // along the edge
-  // A faint step (0.02) keeps most of the weight: exp(-50 * 0.02).
+  // A faint step (0.02) keeps most of the weight: exp(-alpha * 0.02).
   ColorImage faint(20, 10, 1, 0.5f);
   for (int y = 0; y < 10; ++y) {
     for (int x = 10; x < 20; ++x) faint.at(0, y, x) = 0.52f;
   }
   EXPECT_NEAR(computeEdgeWeights(faint, settings).at(0, 5, 9),
-              std::exp(-50.0 * 0.02), 1e-4);
+              std::exp(-settings.alpha * 0.02), 1e-4);
+  EXPECT_GT(std::exp(-settings.alpha * 0.02), settings.w_min);
   // The luminance sees 0.587 of the green step: a higher weight.
   settings.color_mode = EdgeColorMode::kLuminance;
   settings.w_min = 0.0;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "normal_fusion/detail/solver_internal.h"
 #include "test_util.h"
@@ -120,7 +121,8 @@ TEST(Kernels, DataDualProxMatchesClosedForms) {
         nbar.plane(c)[0] = nb[c];
         f.plane(c)[0] = f0[c];
       }
-      internal::reference::proxDataDual(q, nbar, f, &c_w, sigma, penalty);
+      internal::reference::proxDataDual(q, nbar, f, &c_w, nullptr, sigma,
+                                        penalty);
       float v[3];
       for (int c = 0; c < 3; ++c) v[c] = q0[c] + sigma * (nb[c] - f0[c]);
       const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -135,6 +137,119 @@ TEST(Kernels, DataDualProxMatchesClosedForms) {
       }
     }
   }
+}
+
+/// prox of sigma F^*, F(z) = c huber_delta(|z - f|): q = argmin |q - v|^2 /
+/// (2 sigma) + delta |q|^2 / (2 c) over |q| <= c, v = q0 + sigma (nbar - f);
+/// the minimizer lies along v: searched on a fine grid of lengths.
+TEST(Kernels, DataHuberDualProxMatchesItsDefinition) {
+  const float sigma = 0.7f;
+  for (float c_w : {0.3f, 1.5f}) {
+    for (float delta : {0.0f, 0.1f, 0.8f, 2.0f}) {
+      for (float scale : {0.05f, 1.0f, 4.0f}) {
+        PlanarImage q(1, 1, 3), nbar(1, 1, 3), f(1, 1, 3);
+        const float q0[3] = {0.2f * scale, -0.1f * scale, 0.4f * scale},
+                    nb[3] = {0.0f, 0.6f, -0.8f}, f0[3] = {0.6f, 0.0f, -0.8f};
+        for (int c = 0; c < 3; ++c) {
+          q.plane(c)[0] = q0[c];
+          nbar.plane(c)[0] = nb[c];
+          f.plane(c)[0] = f0[c];
+        }
+        internal::reference::proxDataDual(q, nbar, f, &c_w, &delta, sigma,
+                                          DataPenalty::kL2);
+        double v[3], len = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          v[c] = q0[c] + sigma * (nb[c] - f0[c]);
+          len += v[c] * v[c];
+        }
+        len = std::sqrt(len);
+        double best = 1e30, best_t = 0.0;
+        for (int k = 0; k <= 200000; ++k) {
+          const double t = c_w * k / 200000.0;
+          const double obj = (t - len) * (t - len) / (2.0 * sigma) +
+                             delta / (2.0 * c_w) * t * t;
+          if (obj < best) {
+            best = obj;
+            best_t = t;
+          }
+        }
+        for (int c = 0; c < 3; ++c) {
+          EXPECT_NEAR(q.plane(c)[0], best_t * v[c] / len, 1e-4)
+              << "c=" << c_w << " delta=" << delta << " scale=" << scale;
+        }
+      }
+    }
+  }
+}
+
+/// The local statistics of the prepared inputs: delta = data_eps_local * the
+/// RMS spread in the 3x3 window (0 on a clean plane, large on noise), and the
+/// density correction (window / valid) on a sparse input only.
+TEST(LocalStatistics, ThresholdsFollowTheSpreadAndSparseSamplesCountMore) {
+  const int W = 40, H = 30;
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(W, H, &gt);
+  // Dense input: exact on the left half, very noisy on the right half.
+  NormalInput dense;
+  dense.normals = gt;
+  const NormalMap noisy = test::noisy(gt, 0.8, 5);
+  for (int y = 0; y < H; ++y) {
+    for (int x = W / 2; x < W; ++x) {
+      for (int c = 0; c < 3; ++c) {
+        dense.normals.at(c, y, x) = noisy.at(c, y, x);
+      }
+    }
+  }
+  // Sparse input: one isolated sample at (5, 5) and a 3x3 block at 30..32.
+  NormalInput sparse;
+  sparse.normals.resize(W, H, 3);
+  sparse.normals.fill(std::numeric_limits<float>::quiet_NaN());
+  for (int c = 0; c < 3; ++c) sparse.normals.at(c, 5, 5) = gt.at(c, 5, 5);
+  for (int y = 10; y < 13; ++y) {
+    for (int x = 30; x < 33; ++x) {
+      for (int c = 0; c < 3; ++c) sparse.normals.at(c, y, x) = gt.at(c, y, x);
+    }
+  }
+  problem.inputs = {dense, sparse};
+  SolverSettings settings;
+  settings.lambda = 0.5;
+  settings.data_eps = 0.0;
+  settings.data_eps_local = 1.0;
+  settings.density_power = 1.0;
+  settings.local_radius = 1;
+  const internal::PreparedLevel level =
+      internal::prepareFinest(problem, settings);
+  ASSERT_TRUE(level.data_huber);
+  const PlanarImage& delta_dense = level.data_eps[0];
+  // Clean plane (away from the crease of the two planes): delta ~ 0.
+  EXPECT_LT(delta_dense.at(0, 15, 3), 1e-3f);
+  // Heavy noise: the spread of sigma 0.8 noise is far above 0.3.
+  float mean_noisy = 0.0f;
+  for (int x = W / 2 + 2; x < W - 2; ++x)
+    mean_noisy += delta_dense.at(0, 15, x);
+  EXPECT_GT(mean_noisy / (W / 2 - 4), 0.3f);
+  // Dense weights keep lambda in the interior (window fully valid).
+  EXPECT_NEAR(level.data_weight[0].at(0, 15, 10), 0.5f, 1e-6f);
+  // The isolated sample: 9 window pixels, 1 valid: weight 9 lambda, delta 0.
+  EXPECT_NEAR(level.data_weight[1].at(0, 5, 5), 4.5f, 1e-5f);
+  EXPECT_EQ(level.data_eps[1].at(0, 5, 5), 0.0f);
+  // The block's centre sees 9 of 9: lambda; its corner 4 of 9: 9/4 lambda.
+  EXPECT_NEAR(level.data_weight[1].at(0, 11, 31), 0.5f, 1e-6f);
+  EXPECT_NEAR(level.data_weight[1].at(0, 10, 30), 0.5f * 9.0f / 4.0f, 1e-5f);
+  // Missing pixels keep weight 0.
+  EXPECT_EQ(level.data_weight[1].at(0, 20, 20), 0.0f);
+
+  // Off: no thresholds, no correction.
+  settings.data_eps_local = 0.0;
+  settings.density_power = 0.0;
+  const internal::PreparedLevel plain =
+      internal::prepareFinest(problem, settings);
+  EXPECT_FALSE(plain.data_huber);
+  EXPECT_NEAR(plain.data_weight[1].at(0, 5, 5), 0.5f, 1e-6f);
+  // The squared penalty has no threshold.
+  settings.data_eps_local = 1.0;
+  settings.penalty = DataPenalty::kSquaredL2;
+  EXPECT_FALSE(internal::prepareFinest(problem, settings).data_huber);
 }
 
 TEST(Kernels, TangentProjectionLandsOnPlaneAndVisibleSet) {
@@ -168,8 +283,10 @@ TEST(Kernels, VisibleProjectionIsOnTheBoundary) {
   EXPECT_NEAR(n[0] * n[0] + n[1] * n[1] + n[2] * n[2], 1.0f, 1e-5);
 }
 
-/// Builds a random level with L inputs (some missing) for backend comparisons.
-internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed) {
+/// Builds a random level with L inputs (some missing) for backend comparisons;
+/// with `data_huber`, random per-pixel data thresholds delta in [0, 0.6].
+internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed,
+                                    bool data_huber = false) {
   internal::PreparedLevel level;
   level.width = W;
   level.height = H;
@@ -193,7 +310,14 @@ internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed) {
     }
     level.data.push_back(f);
     level.data_weight.push_back(c);
+    PlanarImage delta = test::randomImage(W, H, 1, seed + 30 + l);
+    for (std::size_t i = 0; i < delta.pixelCount(); ++i) {
+      delta.plane(0)[i] =
+          data_huber ? 0.6f * std::abs(delta.plane(0)[i]) : 0.0f;
+    }
+    level.data_eps.push_back(delta);
   }
+  level.data_huber = data_huber;
   return level;
 }
 
@@ -251,11 +375,58 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
   EXPECT_NEAR(e_fast, e_ref, 1e-4 * std::abs(e_ref));
 }
 
+/// The same with per-pixel Huber thresholds on the data terms.
+TEST(FastMatchesReferenceDataHuber, SameIteratesAfterManyIterations) {
+  for (int L : {1, 2, 3}) {
+    const auto level = randomLevel(37, 23, L, 90 + L, /*data_huber=*/true);
+    internal::InnerParams params;
+    params.tau = 1.0f / (4.0f + L);
+    params.sigma = 0.5f;
+    params.sigma_data = 1.0f;
+    params.huber_eps = 0.05f;
+    params.soft_visibility = true;
+    params.num_threads = 2;
+    internal::IterationState ref, fast;
+    initState(level, ref);
+    initState(level, fast);
+    internal::runInnerReference(level, params, ref, 60);
+    internal::runInnerFast(level, params, fast, 60);
+    double max_diff = 0.0;
+    for (const auto& pair : {std::make_pair(&ref.n, &fast.n),
+                             std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
+      for (std::size_t i = 0; i < pair.first->pixelCount() * 3; ++i) {
+        max_diff = std::max(
+            max_diff, static_cast<double>(std::abs(pair.first->data()[i] -
+                                                   pair.second->data()[i])));
+      }
+    }
+    EXPECT_LT(max_diff, 1e-4) << "L " << L;
+    // The thresholds change the iterates: a run without them differs.
+    auto plain = level;
+    plain.data_huber = false;
+    internal::IterationState other;
+    initState(plain, other);
+    internal::runInnerReference(plain, params, other, 60);
+    double change = 0.0;
+    for (std::size_t i = 0; i < other.q[0].pixelCount() * 3; ++i) {
+      change =
+          std::max(change, static_cast<double>(std::abs(other.q[0].data()[i] -
+                                                        ref.q[0].data()[i])));
+    }
+    EXPECT_GT(change, 1e-2) << "L " << L;
+    const double e_ref =
+        internal::energy(level, 0.05, DataPenalty::kL2, ref.n, 1);
+    const double e_fast =
+        internal::energyFast(level, 0.05, DataPenalty::kL2, fast.n, 2);
+    EXPECT_NEAR(e_fast, e_ref, 1e-4 * std::abs(e_ref));
+  }
+}
+
 /// The temporal-blocking pipeline gives the same iterates for any thread
 /// count, block depth and iteration count (rounds that do not divide evenly,
 /// threads with nothing to do in a round).
 TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
-  const auto level = randomLevel(29, 17, 2, 7);
+  const auto level = randomLevel(29, 17, 2, 7, /*data_huber=*/true);
   internal::InnerParams params;
   // Diagonal preconditioning steps (different dual steps per term).
   params.tau = 1.0f / 6.0f;
@@ -292,13 +463,16 @@ TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
 
 TEST(FastEnergy, MatchesTheReferenceEnergy) {
   for (int L : {1, 3}) {
-    const auto level = randomLevel(45, 31, L, 3 + L);
-    const PlanarImage n = test::randomImage(45, 31, 3, 77);
-    for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
-      for (double eps : {0.0, 0.05, 0.5}) {
-        const double e_ref = internal::energy(level, eps, penalty, n, 1);
-        const double e_fast = internal::energyFast(level, eps, penalty, n, 2);
-        EXPECT_NEAR(e_fast, e_ref, 1e-5 * e_ref) << "L " << L << " eps " << eps;
+    for (bool data_huber : {false, true}) {
+      const auto level = randomLevel(45, 31, L, 3 + L, data_huber);
+      const PlanarImage n = test::randomImage(45, 31, 3, 77);
+      for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
+        for (double eps : {0.0, 0.05, 0.5}) {
+          const double e_ref = internal::energy(level, eps, penalty, n, 1);
+          const double e_fast = internal::energyFast(level, eps, penalty, n, 2);
+          EXPECT_NEAR(e_fast, e_ref, 1e-5 * e_ref)
+              << "L " << L << " eps " << eps << " data_huber " << data_huber;
+        }
       }
     }
   }

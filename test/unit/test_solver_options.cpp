@@ -24,6 +24,10 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::applySolverOption("--edge-beta", "2", s);
   cli::applySolverOption("--edge-wmin", "0.2", s);
   cli::applySolverOption("--edge-sigma", "0.8", s);
+  cli::applySolverOption("--data-eps", "0.05", s);
+  cli::applySolverOption("--data-eps-local", "1.5", s);
+  cli::applySolverOption("--density-power", "0.5", s);
+  cli::applySolverOption("--local-radius", "2", s);
   cli::applySolverOption("--inner-iterations", "30", s);
   cli::applySolverOption("--max-outer", "9", s);
   cli::applySolverOption("--max-iterations", "333", s);
@@ -47,6 +51,10 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   EXPECT_EQ(s.edges.beta, 2.0);
   EXPECT_EQ(s.edges.w_min, 0.2);
   EXPECT_EQ(s.edges.smoothing_sigma, 0.8);
+  EXPECT_EQ(s.data_eps, 0.05);
+  EXPECT_EQ(s.data_eps_local, 1.5);
+  EXPECT_EQ(s.density_power, 0.5);
+  EXPECT_EQ(s.local_radius, 2);
   EXPECT_EQ(s.inner_iterations, 30);
   EXPECT_EQ(s.max_outer_iterations, 9);
   EXPECT_EQ(s.max_total_inner_iterations, 333);
@@ -63,7 +71,8 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::printSolverOptions(help, SolverSettings());
   for (const char* name :
        {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
-        "--backend", "--max-iterations"}) {
+        "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
+        "--density-power", "--local-radius"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }

@@ -23,6 +23,10 @@ struct PreparedLevel {
   std::vector<PlanarImage> data;  ///< f_l: 3 planes, unit or 0 where missing
   /// c_l = lambda * weight_l * conf * valid: 1 plane each.
   std::vector<PlanarImage> data_weight;
+  /// delta_l: Huber threshold of each data term, 1 plane each; read only when
+  /// `data_huber` (else every delta is 0: the plain unsquared penalty).
+  std::vector<PlanarImage> data_eps;
+  bool data_huber = false;
   PlanarImage edge_weight;  ///< w_h (plane 0), w_v (plane 1)
   std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
   CameraIntrinsics K;
@@ -137,8 +141,10 @@ void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
 void clampVector(float v[3], float radius);
 void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
                    float sigma, float eps);
+/// `delta` may be null (0 everywhere).
 void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
-                  const float* c_weight, float sigma, DataPenalty penalty);
+                  const float* c_weight, const float* delta, float sigma,
+                  DataPenalty penalty);
 void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& div, const PlanarImage& q_sum,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
@@ -158,13 +164,23 @@ void computeEdgeWeightsInto(const ColorImage& image,
 /// Validates the problem and builds the finest level (its guide points to the
 /// problem's image, which must outlive it): f_l in the optical
 /// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
-/// (0 where facing away in hard mode), and the edge weights.
+/// (0 where facing away in hard mode) times the density correction, the data
+/// terms' Huber thresholds and the edge weights.
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
 /// The same into reused buffers, with `threads` threads.
 void prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads);
+
+/// The local statistics of one prepared input (SolverSettings: data_eps,
+/// data_eps_local, density_power, local_radius): reads f (3 planes, 0 where
+/// missing), writes the Huber thresholds delta (1 plane; only when the
+/// unsquared penalty has a threshold) and scales the weights c (1 plane) by
+/// the density correction.
+void applyLocalStatistics(const SolverSettings& settings,
+                          const PlanarImage& data, PlanarImage& data_eps,
+                          PlanarImage& data_weight, int threads);
 
 /// E(n) of the fast backend: float terms summed per row, rows in double.
 double energyFast(const PreparedLevel& level, double huber_eps,
