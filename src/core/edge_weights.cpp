@@ -93,7 +93,8 @@ void differenceMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     const float* row = img + static_cast<std::size_t>(y) * W;
-    const float* next = img + static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
+    const float* next =
+        img + static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
     float* out_h = mag_h + static_cast<std::size_t>(y) * W;
     float* out_v = mag_v + static_cast<std::size_t>(y) * W;
     for (int x = 0; x < W; ++x) {
@@ -176,8 +177,10 @@ void computeEdgeWeightsInto(const ColorImage& image,
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float gh = centred && x + 1 < W ? std::max(mag_h[i], mag_h[i + 1]) : mag_h[i];
-      const float gv = centred && y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
+      const float gh =
+          centred && x + 1 < W ? std::max(mag_h[i], mag_h[i + 1]) : mag_h[i];
+      const float gv =
+          centred && y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
       weights.plane(0)[i] = weight_of(gh);
       weights.plane(1)[i] = weight_of(gv);
     }
