@@ -187,20 +187,27 @@ TEST(Solver, ZeroWeightPixelsAreFilledFromNeighbours) {
   }
 }
 
-TEST(Solver, FusingDenseNoisyWithSparseAccurateBeatsEither) {
-  NormalMap gt;
-  FusionProblem problem = test::cylinderScene(64, 48, &gt);
-  NormalInput dense;
-  dense.normals = test::noisy(gt, 0.5, 11);
+/// `gt` with paper noise of `sigma` at a random 5 % of the pixels, NaN at the
+/// others.
+NormalInput sparseInput(const NormalMap& gt, double sigma, std::uint64_t seed) {
   NormalInput sparse;
-  sparse.normals = test::noisy(gt, 0.03, 12);
-  std::mt19937 rng(13);
+  sparse.normals = test::noisy(gt, sigma, seed);
+  std::mt19937 rng(static_cast<std::mt19937::result_type>(seed + 1));
   std::uniform_real_distribution<float> u(0, 1);
   for (std::size_t i = 0; i < gt.pixelCount(); ++i) {
     if (u(rng) > 0.05f) {
       for (int c = 0; c < 3; ++c) sparse.normals.plane(c)[i] = kNaN;
     }
   }
+  return sparse;
+}
+
+TEST(Solver, FusingDenseNoisyWithSparseAccurateBeatsEither) {
+  NormalMap gt;
+  FusionProblem problem = test::cylinderScene(64, 48, &gt);
+  NormalInput dense;
+  dense.normals = test::noisy(gt, 0.5, 11);
+  NormalInput sparse = sparseInput(gt, 0.03, 12);
   sparse.weight = 4.0;
   dense.weight = 0.25;  // weights reflect each input's accuracy
   SolverSettings settings;
@@ -224,16 +231,7 @@ TEST(Solver, DensityCorrectionLetsASparseAccurateInputCount) {
   FusionProblem problem = test::cylinderScene(64, 48, &gt);
   NormalInput dense;
   dense.normals = test::noisy(gt, 0.6, 21);
-  NormalInput sparse;
-  sparse.normals = test::noisy(gt, 0.03, 22);
-  std::mt19937 rng(23);
-  std::uniform_real_distribution<float> u(0, 1);
-  for (std::size_t i = 0; i < gt.pixelCount(); ++i) {
-    if (u(rng) > 0.05f) {
-      for (int c = 0; c < 3; ++c) sparse.normals.plane(c)[i] = kNaN;
-    }
-  }
-  problem.inputs = {dense, sparse};
+  problem.inputs = {dense, sparseInput(gt, 0.03, 22)};
   auto mse_with = [&](double density_power) {
     SolverSettings settings;
     settings.density_power = density_power;

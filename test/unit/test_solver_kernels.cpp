@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 #include <limits>
+#include <utility>
 
 #include "normal_fusion/detail/solver_internal.h"
 #include "test_util.h"
@@ -339,6 +341,22 @@ void initState(const internal::PreparedLevel& level,
   for (auto& q : s.q) q.fill(0.0f);
 }
 
+/// Largest |a - b| over all values of the pairs of images.
+double maxAbsDiff(
+    std::initializer_list<std::pair<const PlanarImage*, const PlanarImage*>>
+        pairs) {
+  double max_diff = 0.0;
+  for (const auto& pair : pairs) {
+    const std::size_t n = pair.first->pixelCount() * pair.first->channels();
+    for (std::size_t i = 0; i < n; ++i) {
+      max_diff = std::max(
+          max_diff, static_cast<double>(std::abs(pair.first->data()[i] -
+                                                 pair.second->data()[i])));
+    }
+  }
+  return max_diff;
+}
+
 class FastMatchesReference
     : public ::testing::TestWithParam<std::tuple<int, DataPenalty, bool>> {};
 
@@ -357,18 +375,11 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
   initState(level, fast);
   internal::runInnerReference(level, params, ref, 60);
   internal::runInnerFast(level, params, fast, 60);
-  double max_diff = 0.0;
-  for (const auto& pair :
-       {std::make_pair(&ref.n, &fast.n), std::make_pair(&ref.p_h, &fast.p_h),
-        std::make_pair(&ref.p_v, &fast.p_v),
-        std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
-    for (std::size_t i = 0; i < pair.first->pixelCount() * 3; ++i) {
-      max_diff = std::max(
-          max_diff, static_cast<double>(std::abs(pair.first->data()[i] -
-                                                 pair.second->data()[i])));
-    }
-  }
-  EXPECT_LT(max_diff, 1e-4);
+  EXPECT_LT(maxAbsDiff({{&ref.n, &fast.n},
+                        {&ref.p_h, &fast.p_h},
+                        {&ref.p_v, &fast.p_v},
+                        {&ref.q[L - 1], &fast.q[L - 1]}}),
+            1e-4);
   const double e_ref = internal::energy(level, 0.05, params.penalty, ref.n, 1);
   const double e_fast =
       internal::energy(level, 0.05, params.penalty, fast.n, 1);
@@ -391,29 +402,16 @@ TEST(FastMatchesReferenceDataHuber, SameIteratesAfterManyIterations) {
     initState(level, fast);
     internal::runInnerReference(level, params, ref, 60);
     internal::runInnerFast(level, params, fast, 60);
-    double max_diff = 0.0;
-    for (const auto& pair : {std::make_pair(&ref.n, &fast.n),
-                             std::make_pair(&ref.q[L - 1], &fast.q[L - 1])}) {
-      for (std::size_t i = 0; i < pair.first->pixelCount() * 3; ++i) {
-        max_diff = std::max(
-            max_diff, static_cast<double>(std::abs(pair.first->data()[i] -
-                                                   pair.second->data()[i])));
-      }
-    }
-    EXPECT_LT(max_diff, 1e-4) << "L " << L;
+    EXPECT_LT(maxAbsDiff({{&ref.n, &fast.n}, {&ref.q[L - 1], &fast.q[L - 1]}}),
+              1e-4)
+        << "L " << L;
     // The thresholds change the iterates: a run without them differs.
     auto plain = level;
     plain.data_huber = false;
     internal::IterationState other;
     initState(plain, other);
     internal::runInnerReference(plain, params, other, 60);
-    double change = 0.0;
-    for (std::size_t i = 0; i < other.q[0].pixelCount() * 3; ++i) {
-      change =
-          std::max(change, static_cast<double>(std::abs(other.q[0].data()[i] -
-                                                        ref.q[0].data()[i])));
-    }
-    EXPECT_GT(change, 1e-2) << "L " << L;
+    EXPECT_GT(maxAbsDiff({{&other.q[0], &ref.q[0]}}), 1e-2) << "L " << L;
     const double e_ref =
         internal::energy(level, 0.05, DataPenalty::kL2, ref.n, 1);
     const double e_fast =
@@ -445,15 +443,8 @@ TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
         internal::IterationState fast;
         initState(level, fast);
         internal::runInnerFast(level, params, fast, iterations);
-        double max_diff = 0.0;
-        for (std::size_t i = 0; i < fast.n.pixelCount() * 3; ++i) {
-          max_diff = std::max(
-              max_diff, static_cast<double>(
-                            std::abs(fast.n.data()[i] - ref.n.data()[i])));
-          max_diff = std::max(
-              max_diff, static_cast<double>(
-                            std::abs(fast.p_v.data()[i] - ref.p_v.data()[i])));
-        }
+        const double max_diff =
+            maxAbsDiff({{&fast.n, &ref.n}, {&fast.p_v, &ref.p_v}});
         EXPECT_LT(max_diff, 1e-5) << "iterations " << iterations << " threads "
                                   << threads << " depth " << depth;
       }
