@@ -87,6 +87,14 @@ struct SolverSettings {
   double density_power = 1.0;
   /// Half-size of the window of s(x) and of the density, in pixels (>= 1).
   int local_radius = 1;
+  /// Edge weights of the links between two pixels that no input observes are
+  /// multiplied by this, in (0, 1] (1 = off, the default): a pixel next to an
+  /// observed surface and inside a hole (a dropout, a silhouette's rim)
+  /// follows that surface rather than the empty region around it. Fixed
+  /// before the solve. 0.5 fills Castle's holes better (see README) but also
+  /// acts like a larger lambda for sparse inputs, whose pixels are nearly all
+  /// holes.
+  double hole_link_weight = 1.0;
 
   // Iterations and stopping.
   int inner_iterations = 50;      ///< Chambolle-Pock iterations per outer step

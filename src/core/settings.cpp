@@ -48,6 +48,12 @@ void SolverSettings::validate() const {
   requireRange("data_eps_local", data_eps_local, 0.0, 100.0);
   requireRange("density_power", density_power, 0.0, 4.0);
   requireRange("local_radius", local_radius, 1, 8);
+  requireRange("hole_link_weight", hole_link_weight, 0.0, 1.0);
+  if (hole_link_weight <= 0.0) {
+    throw ParameterError(
+        "setting hole_link_weight = 0: expected in (0, 1] (0 would cut holes "
+        "off from their surroundings)");
+  }
   requireAtLeast("inner_iterations", inner_iterations, 1);
   requireAtLeast("max_outer_iterations", max_outer_iterations, 1);
   requireAtLeast("max_total_inner_iterations", max_total_inner_iterations, 1);

@@ -116,6 +116,10 @@ void prepareFinestInto(const FusionProblem& problem,
     }
   }
   level.valid_pixels = static_cast<int>(valid);
+  if (settings.hole_link_weight < 1.0 && valid < static_cast<long>(W) * H) {
+    weakenHoleLinks(level, static_cast<float>(settings.hole_link_weight),
+                    threads);
+  }
   // Local statistics of each input: Huber thresholds of the data terms
   // (unsquared penalty only) and the density correction of the weights.
   level.data_huber = settings.penalty == DataPenalty::kL2 &&
@@ -125,6 +129,31 @@ void prepareFinestInto(const FusionProblem& problem,
     level.data_eps[l].resize(W, H, 1);
     applyLocalStatistics(settings, level.data[l], level.data_eps[l],
                          level.data_weight[l], threads);
+  }
+}
+
+void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
+  const int W = level.width, H = level.height;
+  // True when some input observes pixel (x, y) (c_l > 0).
+  auto observed = [&level](int x, int y) {
+    for (int l = 0; l < level.num_inputs; ++l) {
+      if (level.data_weight[l].at(0, y, x) > 0.0f) return true;
+    }
+    return false;
+  };
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      if (observed(x, y)) continue;
+      // w_h, w_v of the links to the right and below, when that pixel is not
+      // observed either: w <- factor w.
+      if (x + 1 < W && !observed(x + 1, y)) {
+        level.edge_weight.at(0, y, x) *= factor;
+      }
+      if (y + 1 < H && !observed(x, y + 1)) {
+        level.edge_weight.at(1, y, x) *= factor;
+      }
+    }
   }
 }
 

@@ -75,6 +75,10 @@ const std::map<std::string, Setter>& setters() {
        [](auto& o, auto& v, auto& s) { s.data_eps_local = parseDouble(o, v); }},
       {"--density-power",
        [](auto& o, auto& v, auto& s) { s.density_power = parseDouble(o, v); }},
+      {"--hole-link-weight",
+       [](auto& o, auto& v, auto& s) {
+         s.hole_link_weight = parseDouble(o, v);
+       }},
       {"--local-radius",
        [](auto& o, auto& v, auto& s) { s.local_radius = parseInt(o, v); }},
       {"--inner-iterations",
@@ -190,6 +194,8 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << "  --local-radius N      window half-size of the spread and the "
          "density ["
       << d.local_radius << "]\n"
+      << "  --hole-link-weight X  edge weight factor inside holes, (0, 1] ["
+      << d.hole_link_weight << "]\n"
       << "  --inner-iterations N  Chambolle-Pock iterations per outer step ["
       << d.inner_iterations << "]\n"
       << "  --max-outer N         majorize-minimize steps ["

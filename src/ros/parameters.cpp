@@ -46,6 +46,7 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.real("data_eps_local", solver.data_eps_local, 0.0, 100.0);
   v.real("density_power", solver.density_power, 0.0, 4.0);
   v.integer("local_radius", solver.local_radius, 1, 8);
+  v.real("hole_link_weight", solver.hole_link_weight, 1e-6, 1.0);
   // Edge weights.
   v.flag("edge_enabled", solver.edges.enabled);
   v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, kInf);

@@ -429,6 +429,9 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
   s.local_radius = 0;
   expect_bad(s, "local_radius");
   s = SolverSettings();
+  s.hole_link_weight = 0.0;
+  expect_bad(s, "hole_link_weight");
+  s = SolverSettings();
   s.edges.w_min = 2.0;
   expect_bad(s, "w_min");
   s = SolverSettings();

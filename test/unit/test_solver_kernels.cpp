@@ -254,6 +254,47 @@ TEST(LocalStatistics, ThresholdsFollowTheSpreadAndSparseSamplesCountMore) {
   EXPECT_FALSE(internal::prepareFinest(problem, settings).data_huber);
 }
 
+/// Links between two unobserved pixels are weakened by hole_link_weight; links
+/// with an observed end are not.
+TEST(HoleLinks, OnlyLinksInsideAHoleAreWeakened) {
+  const int W = 24, H = 16;
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(W, H, &gt);
+  NormalInput input;
+  input.normals = gt;
+  // A hole of columns 5..8, rows 4..7.
+  for (int y = 4; y <= 7; ++y) {
+    for (int x = 5; x <= 8; ++x) {
+      for (int c = 0; c < 3; ++c) {
+        input.normals.at(c, y, x) = std::numeric_limits<float>::quiet_NaN();
+      }
+    }
+  }
+  problem.inputs = {input};
+  SolverSettings settings;
+  settings.hole_link_weight = 1.0;
+  const internal::PreparedLevel plain =
+      internal::prepareFinest(problem, settings);
+  settings.hole_link_weight = 0.25;
+  const internal::PreparedLevel weak =
+      internal::prepareFinest(problem, settings);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const bool in = x >= 5 && x <= 8 && y >= 4 && y <= 7;
+      const bool right_in = x + 1 >= 5 && x + 1 <= 8 && y >= 4 && y <= 7;
+      const bool below_in = x >= 5 && x <= 8 && y + 1 >= 4 && y + 1 <= 7;
+      EXPECT_FLOAT_EQ(
+          weak.edge_weight.at(0, y, x),
+          plain.edge_weight.at(0, y, x) * (in && right_in ? 0.25f : 1.0f))
+          << x << "," << y;
+      EXPECT_FLOAT_EQ(
+          weak.edge_weight.at(1, y, x),
+          plain.edge_weight.at(1, y, x) * (in && below_in ? 0.25f : 1.0f))
+          << x << "," << y;
+    }
+  }
+}
+
 TEST(Kernels, TangentProjectionLandsOnPlaneAndVisibleSet) {
   const float n0[3] = {0.0f, 0.6f, -0.8f};
   const float r[3] = {0.3f, -0.2f, 1.0f};

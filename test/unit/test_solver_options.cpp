@@ -28,6 +28,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::applySolverOption("--data-eps-local", "1.5", s);
   cli::applySolverOption("--density-power", "0.5", s);
   cli::applySolverOption("--local-radius", "2", s);
+  cli::applySolverOption("--hole-link-weight", "0.75", s);
   cli::applySolverOption("--inner-iterations", "30", s);
   cli::applySolverOption("--max-outer", "9", s);
   cli::applySolverOption("--max-iterations", "333", s);
@@ -55,6 +56,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   EXPECT_EQ(s.data_eps_local, 1.5);
   EXPECT_EQ(s.density_power, 0.5);
   EXPECT_EQ(s.local_radius, 2);
+  EXPECT_EQ(s.hole_link_weight, 0.75);
   EXPECT_EQ(s.inner_iterations, 30);
   EXPECT_EQ(s.max_outer_iterations, 9);
   EXPECT_EQ(s.max_total_inner_iterations, 333);
@@ -72,7 +74,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   for (const char* name :
        {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
         "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
-        "--density-power", "--local-radius"}) {
+        "--density-power", "--local-radius", "--hole-link-weight"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }

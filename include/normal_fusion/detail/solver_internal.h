@@ -165,13 +165,17 @@ void computeEdgeWeightsInto(const ColorImage& image,
 /// problem's image, which must outlive it): f_l in the optical
 /// frame (unit, 0 where missing), c_l = lambda * weight_l * confidence * valid
 /// (0 where facing away in hard mode) times the density correction, the data
-/// terms' Huber thresholds and the edge weights.
+/// terms' Huber thresholds and the edge weights (weakened inside holes).
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
 /// The same into reused buffers, with `threads` threads.
 void prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads);
+
+/// Multiplies the edge weights of the links between two pixels that no input
+/// observes by `factor` (SolverSettings::hole_link_weight).
+void weakenHoleLinks(PreparedLevel& level, float factor, int threads);
 
 /// The local statistics of one prepared input (SolverSettings: data_eps,
 /// data_eps_local, density_power, local_radius): reads f (3 planes, 0 where
