@@ -1696,7 +1696,10 @@ std::string cpuModel() {
 std::string settingsText(const nf::SolverSettings& s) {
   std::ostringstream out;
   out << "lambda " << s.lambda << ", eps " << s.huber_eps << ", penalty "
-      << nf::toString(s.penalty) << ", visibility "
+      << nf::toString(s.penalty) << ", data Huber threshold " << s.data_eps
+      << " + " << s.data_eps_local << " x local spread, density power "
+      << s.density_power << ", local radius " << s.local_radius
+      << ", hole link weight " << s.hole_link_weight << ", visibility "
       << nf::toString(s.visibility) << ", edges "
       << (s.edges.enabled ? "on" : "off") << " (alpha " << s.edges.alpha
       << ", beta " << s.edges.beta << ", w_min " << s.edges.w_min << ", sigma "
