@@ -1910,10 +1910,17 @@ int run(int argc, char** argv) {
           "|---|---|---|---|---:|---|---:|\n";
     for (const CaseResult& r : all) md << summaryLine(r) << "\n";
   }
-  md << "\n## Files\n\n";
-  if (!paper.empty()) md << "- " << plot_path << "\n";
-  md << "- " << csv_path << "\n- " << grid_path << "\n";
-  for (const std::string& f : example_files) md << "- " << f << "\n";
+  // Files by name: results.md sits beside them.
+  auto file_name = [](const std::string& path) {
+    const std::size_t slash = path.find_last_of('/');
+    return slash == std::string::npos ? path : path.substr(slash + 1);
+  };
+  md << "\n## Files\n\nIn the output folder, beside this file:\n\n";
+  if (!paper.empty()) md << "- " << file_name(plot_path) << "\n";
+  md << "- " << file_name(csv_path) << "\n- " << file_name(grid_path) << "\n";
+  for (const std::string& f : example_files) {
+    md << "- " << file_name(f) << "\n";
+  }
 
   std::cout << md.str();
   std::ofstream md_file(md_path);
