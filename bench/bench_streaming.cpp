@@ -42,6 +42,9 @@ int main(int argc, char** argv) {
   int frames = 20, width = 640, height = 480, threads = 2, scene = 0;
   double budget_ms = 33.0, degrees_per_frame = 0.3;
   bool warm_start = true;  // --warm 0: every frame cold-started (comparison)
+  // --iterations N: N inner iterations per frame and no budget, so that
+  // changes to the warm start can be compared without timing noise.
+  int iterations = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -61,6 +64,8 @@ int main(int argc, char** argv) {
       degrees_per_frame = value;
     else if (key == "--warm")
       warm_start = value != 0.0;
+    else if (key == "--iterations")
+      iterations = static_cast<int>(value);
     else {
       std::fprintf(stderr, "bench_streaming: unknown option %s\n", key.c_str());
       return 2;
@@ -70,8 +75,8 @@ int main(int argc, char** argv) {
       scene, width, height, frames + 1, degrees_per_frame);
   nf::SolverSettings live;
   live.num_threads = threads;
-  live.time_budget_ms = budget_ms;
-  live.max_total_inner_iterations = 100000;
+  live.time_budget_ms = iterations > 0 ? 0.0 : budget_ms;
+  live.max_total_inner_iterations = iterations > 0 ? iterations : 100000;
   nf::SolverSettings converged;
   converged.num_threads = threads;
   converged.relative_tolerance = 1e-6;
@@ -81,8 +86,9 @@ int main(int argc, char** argv) {
 
   std::printf(
       "# streaming: scene %d, %dx%d, 2 inputs, %.2f deg/frame, budget %.1f ms, "
-      "%d threads\n",
-      scene, width, height, degrees_per_frame, budget_ms, threads);
+      "%d inner iterations per frame (0: by the budget), %d threads\n",
+      scene, width, height, degrees_per_frame, live.time_budget_ms, iterations,
+      threads);
   std::printf(
       "| frame | solve ms | inner its | warm | PSNR live (dB) | PSNR converged "
       "(dB) | deficit (dB) | PSNR warm start (dB) | PSNR warped ground truth "

@@ -8,15 +8,21 @@
 
 namespace normal_fusion {
 
+/// Largest angle between the source normals that the warp blends, degrees.
+constexpr double kMaxBlendDegrees = 15.0;
+
 /// Warps a state solved on the previous frame into the current one, for a
 /// camera that rotated by R_cur_prev (row-major; a point in the previous
 /// camera frame X_prev appears at R_cur_prev X_prev in the current one; any
 /// translation is ignored). Pixels move by the homography K R_cur_prev K^-1
 /// and normals (and the duals, which live in the same 3-D coordinates) are
-/// rotated by R_cur_prev. Pixels that come from outside the previous image get
-/// NaN normals (the solver's warm start fills them as a cold start would, from
-/// the current inputs) and zero duals. Throws InputError on a bad K or a
-/// non-rotation R.
+/// rotated by R_cur_prev. Pixels that come from outside the previous image,
+/// and pixels whose source pixels hold normals more than kMaxBlendDegrees apart
+/// (an edge of the map: a bilinear blend would be a normal of neither side,
+/// and a translation of the camera, which the warp ignores, moves edges
+/// anyway), get NaN normals (the solver's warm start fills them as a cold
+/// start would, from the current inputs) and zero duals. Throws InputError on
+/// a bad K or a non-rotation R.
 void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                          const std::array<double, 9>& R_cur_prev);
 

@@ -29,6 +29,37 @@ bool sampleRotated(const PlanarImage& src, double u, double v,
   return true;
 }
 
+/// cos kMaxBlendDegrees.
+const float kMinBlendCos =
+    static_cast<float>(std::cos(kMaxBlendDegrees * 3.14159265358979 / 180.0));
+
+/// True when the source pixels around (u, v) (inside the image) that carry
+/// weight in the bilinear blend hold normals within kMaxBlendDegrees of each
+/// other.
+bool blendable(const PlanarImage& normals, double u, double v) {
+  const int W = normals.width(), H = normals.height();
+  const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
+  const double tx = u - x0, ty = v - y0;
+  // Weights below 1e-3 (a sample on a pixel centre, up to rounding) do not
+  // count.
+  const int x_lo = tx > 0.999 ? std::min(x0 + 1, W - 1) : x0;
+  const int x_hi = tx > 1e-3 ? std::min(x0 + 1, W - 1) : x0;
+  const int y_lo = ty > 0.999 ? std::min(y0 + 1, H - 1) : y0;
+  const int y_hi = ty > 1e-3 ? std::min(y0 + 1, H - 1) : y0;
+  const int xs[4] = {x_lo, x_hi, x_lo, x_hi};
+  const int ys[4] = {y_lo, y_lo, y_hi, y_hi};
+  for (int a = 0; a < 4; ++a) {
+    for (int b = a + 1; b < 4; ++b) {
+      float dot = 0.0f;
+      for (int c = 0; c < 3; ++c) {
+        dot += normals.at(c, ys[a], xs[a]) * normals.at(c, ys[b], xs[b]);
+      }
+      if (!(dot >= kMinBlendCos)) return false;  // NaN too
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
 void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
@@ -78,7 +109,10 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
             (Km[0] * r_prev[0] + Km[1] * r_prev[1] + Km[2] * r_prev[2]) / w;
         const double v =
             (Km[3] * r_prev[0] + Km[4] * r_prev[1] + Km[5] * r_prev[2]) / w;
-        inside = sampleRotated(state.normals, u, v, R, n);
+        // An edge of the map between the source pixels: a blend would be a
+        // normal of neither side; the current inputs decide there.
+        inside = sampleRotated(state.normals, u, v, R, n) &&
+                 blendable(state.normals, u, v);
         if (inside && has_duals) {
           float p[3];
           sampleRotated(state.dual_h, u, v, R, p);
