@@ -47,6 +47,17 @@ int resolveThreads(int requested) {
 
 namespace internal {
 
+namespace {
+
+/// True when the data terms carry Huber thresholds: the unsquared penalty
+/// with a global or a local part of delta.
+bool usesDataHuber(const SolverSettings& settings) {
+  return settings.penalty == DataPenalty::kL2 &&
+         (settings.data_eps > 0.0 || settings.data_eps_local > 0.0);
+}
+
+}  // namespace
+
 void prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads) {
@@ -122,8 +133,7 @@ void prepareFinestInto(const FusionProblem& problem,
   }
   // Local statistics of each input: Huber thresholds of the data terms
   // (unsquared penalty only) and the density correction of the weights.
-  level.data_huber = settings.penalty == DataPenalty::kL2 &&
-                     (settings.data_eps > 0.0 || settings.data_eps_local > 0.0);
+  level.data_huber = usesDataHuber(settings);
   level.data_eps.resize(level.num_inputs);
   for (int l = 0; l < level.num_inputs; ++l) {
     level.data_eps[l].resize(W, H, 1);
@@ -162,8 +172,7 @@ void applyLocalStatistics(const SolverSettings& settings,
                           PlanarImage& data_weight, int threads) {
   const int W = data.width(), H = data.height();
   const int r = settings.local_radius;
-  const bool huber = settings.penalty == DataPenalty::kL2 &&
-                     (settings.data_eps > 0.0 || settings.data_eps_local > 0.0);
+  const bool huber = usesDataHuber(settings);
   const bool density = settings.density_power > 0.0;
   const float density_power = static_cast<float>(settings.density_power);
   const float eps_global = static_cast<float>(settings.data_eps);
