@@ -45,7 +45,9 @@ struct SolveReport {
       0;  ///< steps whose normalized result raised E (kept n0)
   int inner_iterations = 0;  ///< Chambolle-Pock iterations at the finest level
   int coarse_inner_iterations =
-      0;                         ///< iterations on the coarser pyramid levels
+      0;                      ///< iterations on the coarser pyramid levels
+  int refined_pixels = 0;     ///< pixels of the warm start's local refinement
+  int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
   std::vector<double> energies;  ///< E at the finest level: start, then each
                                  ///< accepted outer step
   std::vector<double> energy_seconds;  ///< when each of `energies` was reached,

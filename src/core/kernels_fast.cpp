@@ -17,6 +17,8 @@ namespace internal {
 namespace {
 
 constexpr float kTiny = 1e-30f;
+/// Active pixels per thread below which a local refinement runs on one.
+constexpr int kMinActivePerThread = 4096;
 
 /// Scale that maps a vector of length sqrt(len2) into the ball of `radius`:
 /// clamp_c(v) = v * min(1, c / |v|), and 0 when c = 0.
@@ -213,6 +215,31 @@ void subtractRow(int W, const float* __restrict q, float* __restrict d) {
 
 /// n <- Proj_C(n + tau d), nbar <- 2 n - n_old for one row; C the tangent
 /// plane at n0, intersected with n . r <= 0 when kSoft.
+/// v <- Proj_C(v): onto the tangent plane n0 . n = 1 (n0 = a), then, when
+/// kSoft, within the plane onto n . r <= 0 (the line n . r = 0 when
+/// violated). Branch-free, for vectorised loops.
+template <bool kSoft>
+inline void projectFeasible(float& vx, float& vy, float& vz, float ax, float ay,
+                            float az, float rx, float ry, float rz) {
+  const float plane_off = ax * vx + ay * vy + az * vz - 1.0f;
+  vx -= plane_off * ax;
+  vy -= plane_off * ay;
+  vz -= plane_off * az;
+  if (kSoft) {
+    const float rv = rx * vx + ry * vy + rz * vz;
+    const float rn0 = rx * ax + ry * ay + rz * az;
+    const float tx = rx - rn0 * ax, ty = ry - rn0 * ay, tz = rz - rn0 * az;
+    const float t2 = tx * tx + ty * ty + tz * tz;
+    // t2 ~ 0 only where n0 = -r/|r|; there r . v = -|r| < 0 and k = 0.
+    const float k = std::max(rv, 0.0f) / std::max(t2, 1e-20f);
+    vx -= k * tx;
+    vy -= k * ty;
+    vz -= k * tz;
+  }
+}
+
+/// n <- Proj_C(n + tau d), nbar <- 2 n - n_old for one row; C the tangent
+/// plane at n0, intersected with n . r <= 0 when kSoft.
 template <bool kSoft>
 NF_MULTIVERSION void primalUpdateRow(
     int W, float tau, const float* __restrict dx, const float* __restrict dy,
@@ -226,26 +253,10 @@ NF_MULTIVERSION void primalUpdateRow(
     float vx = ox + tau * dx[x];
     float vy = oy + tau * dy[x];
     float vz = oz + tau * dz[x];
-    // Onto the tangent plane n0 . n = 1.
-    const float ax = ax_[x], ay = ay_[x], az = az_[x];
-    const float plane_off = ax * vx + ay * vy + az * vz - 1.0f;
-    vx -= plane_off * ax;
-    vy -= plane_off * ay;
-    vz -= plane_off * az;
-    if (kSoft) {
-      // Within the plane onto n . r <= 0 (the line n . r = 0 when violated).
-      const float xf = static_cast<float>(x);
-      const float rx = r0x + drx * xf, ry = r0y + dry * xf, rz = r0z + drz * xf;
-      const float rv = rx * vx + ry * vy + rz * vz;
-      const float rn0 = rx * ax + ry * ay + rz * az;
-      const float tx = rx - rn0 * ax, ty = ry - rn0 * ay, tz = rz - rn0 * az;
-      const float t2 = tx * tx + ty * ty + tz * tz;
-      // t2 ~ 0 only where n0 = -r/|r|; there r . v = -|r| < 0 and k = 0.
-      const float k = std::max(rv, 0.0f) / std::max(t2, 1e-20f);
-      vx -= k * tx;
-      vy -= k * ty;
-      vz -= k * tz;
-    }
+    // Ray r = K^-1 (x, y, 1), affine along the row.
+    const float xf = static_cast<float>(x);
+    projectFeasible<kSoft>(vx, vy, vz, ax_[x], ay_[x], az_[x], r0x + drx * xf,
+                           r0y + dry * xf, r0z + drz * xf);
     nx[x] = vx;
     ny[x] = vy;
     nz[x] = vz;
@@ -372,6 +383,219 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
       }
     }
   }
+}
+
+namespace {
+
+/// p <- clamp_w((p + sigma (nbar_b - nbar_a)) / (1 + sigma eps / w)) on each
+/// link (a, b) of a local refinement: huberDualRow() with indexed nodes.
+NF_MULTIVERSION
+void linkDualsIndexed(int num_links, float sigma, float sigma_eps,
+                      const int* __restrict a, const int* __restrict b,
+                      const float* __restrict w, const float* __restrict nx,
+                      const float* __restrict ny, const float* __restrict nz,
+                      float* __restrict px, float* __restrict py,
+                      float* __restrict pz) {
+  for (int m = 0; m < num_links; ++m) {
+    const float shrink =
+        sigma_eps == 0.0f ? 1.0f : w[m] / (w[m] + sigma_eps + kTiny);
+    const float ax = (px[m] + sigma * (nx[b[m]] - nx[a[m]])) * shrink;
+    const float ay = (py[m] + sigma * (ny[b[m]] - ny[a[m]])) * shrink;
+    const float az = (pz[m] + sigma * (nz[b[m]] - nz[a[m]])) * shrink;
+    const float sc = clampScale(ax * ax + ay * ay + az * az, w[m]);
+    px[m] = ax * sc;
+    py[m] = ay * sc;
+    pz[m] = az * sc;
+  }
+}
+
+/// d = div p at each active pixel: p_right - p_left + p_below - p_above (the
+/// dummy link, p = 0, where a link is missing).
+NF_MULTIVERSION
+void divergenceIndexed(int count, const int* __restrict right,
+                       const int* __restrict left, const int* __restrict below,
+                       const int* __restrict above, const float* __restrict p,
+                       float* __restrict d) {
+  for (int k = 0; k < count; ++k) {
+    d[k] = (p[right[k]] - p[left[k]]) + (p[below[k]] - p[above[k]]);
+  }
+}
+
+/// n <- Proj_C(n + tau d), nbar <- 2 n - n_old at each active pixel (rays
+/// given per pixel).
+template <bool kSoft>
+NF_MULTIVERSION void primalUpdateIndexed(
+    int count, float tau, const float* __restrict dx,
+    const float* __restrict dy, const float* __restrict dz,
+    const float* __restrict ax_, const float* __restrict ay_,
+    const float* __restrict az_, const float* __restrict rx,
+    const float* __restrict ry, const float* __restrict rz,
+    float* __restrict nx, float* __restrict ny, float* __restrict nz,
+    float* __restrict bx, float* __restrict by, float* __restrict bz) {
+  for (int k = 0; k < count; ++k) {
+    const float ox = nx[k], oy = ny[k], oz = nz[k];
+    float vx = ox + tau * dx[k];
+    float vy = oy + tau * dy[k];
+    float vz = oz + tau * dz[k];
+    projectFeasible<kSoft>(vx, vy, vz, ax_[k], ay_[k], az_[k], rx[k], ry[k],
+                           rz[k]);
+    nx[k] = vx;
+    ny[k] = vy;
+    nz[k] = vz;
+    bx[k] = 2.0f * vx - ox;
+    by[k] = 2.0f * vy - oy;
+    bz[k] = 2.0f * vz - oz;
+  }
+}
+
+}  // namespace
+
+void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
+                        ActiveBuffers& b, int iterations) {
+  const int P = b.num_active, L = b.num_inputs;
+  const float sigma_eps = prm.sigma * prm.huber_eps;
+  const float sigma_data = prm.sigma_data;
+  auto& nb = b.nbar;
+  // Small sets are not worth a second thread.
+  const int threads = P >= kMinActivePerThread ? prm.num_threads : 1;
+  auto update = prm.soft_visibility ? primalUpdateIndexed<true>
+                                    : primalUpdateIndexed<false>;
+#pragma omp parallel num_threads(threads)
+  {
+    // Each thread: a fixed share of the links and of the pixels.
+    const int t = omp_get_thread_num(), T = omp_get_num_threads();
+    const int m0 = static_cast<int>(static_cast<long>(b.num_links) * t / T);
+    const int m1 =
+        static_cast<int>(static_cast<long>(b.num_links) * (t + 1) / T);
+    const int k0 = static_cast<int>(static_cast<long>(P) * t / T);
+    const int k1 = static_cast<int>(static_cast<long>(P) * (t + 1) / T);
+    const int np = k1 - k0;
+    for (int it = 0; it < iterations; ++it) {
+      // Dual ascent on the smoothness terms of each link: p <- prox(p +
+      // sigma (nbar_b - nbar_a)).
+      linkDualsIndexed(m1 - m0, prm.sigma, sigma_eps, b.link_a.data() + m0,
+                       b.link_b.data() + m0, b.link_w.data() + m0, nb[0].data(),
+                       nb[1].data(), nb[2].data(), b.p[0].data() + m0,
+                       b.p[1].data() + m0, b.p[2].data() + m0);
+#pragma omp barrier
+      // Dual ascent on each data term at the active pixels (nodes [0, P)):
+      // q_l <- prox(q_l + sigma (nbar - f_l)).
+      for (int l = 0; l < L; ++l) {
+        const float* f[3];
+        float* q[3];
+        for (int ch = 0; ch < 3; ++ch) {
+          f[ch] = b.f.data() + (3 * l + ch) * P + k0;
+          q[ch] = b.q.data() + (3 * l + ch) * P + k0;
+        }
+        const float* c_w = b.c.data() + l * P + k0;
+        const float* n[3] = {nb[0].data() + k0, nb[1].data() + k0,
+                             nb[2].data() + k0};
+        if (prm.penalty == DataPenalty::kL2 && level.data_huber) {
+          dataDualRowHuber(np, sigma_data, c_w, b.delta.data() + l * P + k0,
+                           n[0], n[1], n[2], f[0], f[1], f[2], q[0], q[1],
+                           q[2]);
+        } else if (prm.penalty == DataPenalty::kL2) {
+          dataDualRowL2(np, sigma_data, c_w, n[0], n[1], n[2], f[0], f[1], f[2],
+                        q[0], q[1], q[2]);
+        } else {
+          dataDualRowSquared(np, sigma_data, c_w, n[0], n[1], n[2], f[0], f[1],
+                             f[2], q[0], q[1], q[2]);
+        }
+      }
+      // d = div p - sum_l q_l.
+      for (int ch = 0; ch < 3; ++ch) {
+        divergenceIndexed(
+            np, b.pixel_links[0].data() + k0, b.pixel_links[1].data() + k0,
+            b.pixel_links[2].data() + k0, b.pixel_links[3].data() + k0,
+            b.p[ch].data(), b.d[ch].data() + k0);
+        for (int l = 0; l < L; ++l) {
+          subtractRow(np, b.q.data() + (3 * l + ch) * P + k0,
+                      b.d[ch].data() + k0);
+        }
+      }
+      // Primal descent: n <- Proj_C(n + tau d), nbar <- 2 n - n_old.
+      update(np, prm.tau, b.d[0].data() + k0, b.d[1].data() + k0,
+             b.d[2].data() + k0, b.n0[0].data() + k0, b.n0[1].data() + k0,
+             b.n0[2].data() + k0, b.ray[0].data() + k0, b.ray[1].data() + k0,
+             b.ray[2].data() + k0, b.n[0].data() + k0, b.n[1].data() + k0,
+             b.n[2].data() + k0, nb[0].data() + k0, nb[1].data() + k0,
+             nb[2].data() + k0);
+#pragma omp barrier
+    }
+  }
+}
+
+namespace {
+
+/// Elements per float partial sum of ActiveBuffers::energy() (the blocks are
+/// summed in double).
+constexpr int kEnergyBlock = 256;
+
+/// Sum over links [m0, m1) of w huber_eps(|n_b - n_a|).
+NF_MULTIVERSION
+float linkEnergyBlock(int m0, int m1, float eps, const int* __restrict a,
+                      const int* __restrict b, const float* __restrict w,
+                      const float* __restrict nx, const float* __restrict ny,
+                      const float* __restrict nz) {
+  const float inv_2eps = eps > 0.0f ? 0.5f / eps : 0.0f;
+  float sum = 0.0f;
+  for (int m = m0; m < m1; ++m) {
+    const float gx = nx[b[m]] - nx[a[m]];
+    const float gy = ny[b[m]] - ny[a[m]];
+    const float gz = nz[b[m]] - nz[a[m]];
+    const float z = std::sqrt(gx * gx + gy * gy + gz * gz);
+    sum += w[m] * (z < eps ? z * z * inv_2eps : z - 0.5f * eps);
+  }
+  return sum;
+}
+
+/// Sum over pixels [k0, k1) of c phi(n - f) (unsquared with Huber threshold
+/// delta, or squared).
+NF_MULTIVERSION
+float dataEnergyBlock(int k0, int k1, bool squared, const float* __restrict c,
+                      const float* __restrict delta, const float* __restrict nx,
+                      const float* __restrict ny, const float* __restrict nz,
+                      const float* __restrict fx, const float* __restrict fy,
+                      const float* __restrict fz) {
+  float sum = 0.0f;
+  for (int k = k0; k < k1; ++k) {
+    const float dx = nx[k] - fx[k], dy = ny[k] - fy[k], dz = nz[k] - fz[k];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float z = std::sqrt(d2);
+    const float th = delta[k];
+    const float huber =
+        z < th ? d2 / (2.0f * std::max(th, kTiny)) : z - 0.5f * th;
+    sum += c[k] * (squared ? 0.5f * d2 : huber);
+  }
+  return sum;
+}
+
+}  // namespace
+
+double ActiveBuffers::energy(double huber_eps, DataPenalty penalty) const {
+  const int L = num_inputs, P = num_active;
+  const auto& nn = node_n;
+  double total = 0.0;
+  // Smoothness: w huber(|n_b - n_a|) of each link.
+  for (int m0 = 0; m0 < num_links; m0 += kEnergyBlock) {
+    total += linkEnergyBlock(m0, std::min(num_links, m0 + kEnergyBlock),
+                             static_cast<float>(huber_eps), link_a.data(),
+                             link_b.data(), link_w.data(), nn[0].data(),
+                             nn[1].data(), nn[2].data());
+  }
+  // Data terms: sum_l c_l phi(n - f_l) at each active pixel (c = 0 where an
+  // input is missing).
+  for (int l = 0; l < L; ++l) {
+    for (int k0 = 0; k0 < P; k0 += kEnergyBlock) {
+      total += dataEnergyBlock(
+          k0, std::min(P, k0 + kEnergyBlock),
+          penalty == DataPenalty::kSquaredL2, c.data() + l * P,
+          delta.data() + l * P, nn[0].data(), nn[1].data(), nn[2].data(),
+          f.data() + (3 * l) * P, f.data() + (3 * l + 1) * P,
+          f.data() + (3 * l + 2) * P);
+    }
+  }
+  return total;
 }
 
 namespace {

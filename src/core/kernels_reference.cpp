@@ -66,47 +66,59 @@ void clampVector(float v[3], float radius) {
   }
 }
 
+/// p <- clamp_w(v / (1 + sigma eps / w)): the prox of sigma (w huber_eps)^*
+/// at v = p + sigma grad nbar.
+void huberDualProx(float v[3], float w, float sigma, float eps) {
+  const float shrink = w > 0.0f ? 1.0f / (1.0f + sigma * eps / w) : 0.0f;
+  for (int c = 0; c < 3; ++c) v[c] *= shrink;
+  clampVector(v, w);
+}
+
+/// The prox of sigma F^*, F(z) = c phi(z - f), at v = q + sigma (nbar - f):
+/// unsquared: clamp_c(v / (1 + sigma delta / c)) (Huber with threshold
+///            delta; delta = 0: plain clamp);
+/// squared:   v / (1 + sigma / c).
+void dataDualProx(float v[3], float c_weight, float delta, float sigma,
+                  DataPenalty penalty) {
+  if (penalty == DataPenalty::kL2) {
+    if (delta > 0.0f && c_weight > 0.0f) {
+      for (int c = 0; c < 3; ++c) v[c] /= 1.0f + sigma * delta / c_weight;
+    }
+    clampVector(v, c_weight);
+  } else {
+    const float s = c_weight > 0.0f ? 1.0f / (1.0f + sigma / c_weight) : 0.0f;
+    for (int c = 0; c < 3; ++c) v[c] *= s;
+  }
+}
+
 /// Dual step of the weighted Huber term (prox of sigma (w huber_eps)^*):
 /// p <- clamp_w((p + sigma grad nbar) / (1 + sigma eps / w)).
 void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
                    float sigma, float eps) {
   const std::size_t N = p.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
-    const float w = weight[i];
-    const float shrink = w > 0.0f ? 1.0f / (1.0f + sigma * eps / w) : 0.0f;
     float v[3];
     for (int c = 0; c < 3; ++c) {
-      v[c] = (p.plane(c)[i] + sigma * grad.plane(c)[i]) * shrink;
+      v[c] = p.plane(c)[i] + sigma * grad.plane(c)[i];
     }
-    clampVector(v, w);
+    huberDualProx(v, weight[i], sigma, eps);
     for (int c = 0; c < 3; ++c) p.plane(c)[i] = v[c];
   }
 }
 
 /// Dual step of one data term (prox of sigma F_l^*, F_l(z) = c phi(z - f)):
-/// unsquared: q <- clamp_c((q + sigma (nbar - f)) / (1 + sigma delta / c))
-///            (Huber with threshold delta; delta = 0: plain clamp);
-/// squared:   q <- (q + sigma (nbar - f)) / (1 + sigma / c).
+/// q <- dataDualProx(q + sigma (nbar - f)).
 void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
                   const float* c_weight, const float* delta, float sigma,
                   DataPenalty penalty) {
   const std::size_t N = q.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
-    const float c_w = c_weight[i];
     float v[3];
     for (int c = 0; c < 3; ++c) {
       v[c] = q.plane(c)[i] + sigma * (nbar.plane(c)[i] - f.plane(c)[i]);
     }
-    if (penalty == DataPenalty::kL2) {
-      const float d = delta != nullptr ? delta[i] : 0.0f;
-      if (d > 0.0f && c_w > 0.0f) {
-        for (float& value : v) value /= 1.0f + sigma * d / c_w;
-      }
-      clampVector(v, c_w);
-    } else {
-      const float s = c_w > 0.0f ? 1.0f / (1.0f + sigma / c_w) : 0.0f;
-      for (float& value : v) value *= s;
-    }
+    dataDualProx(v, c_weight[i], delta != nullptr ? delta[i] : 0.0f, sigma,
+                 penalty);
     for (int c = 0; c < 3; ++c) q.plane(c)[i] = v[c];
   }
 }

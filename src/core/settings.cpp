@@ -54,6 +54,8 @@ void SolverSettings::validate() const {
         "setting hole_link_weight = 0: expected in (0, 1] (0 would cut holes "
         "off from their surroundings)");
   }
+  requireRange("warm_refine_iterations", warm_refine_iterations, 0, 100000);
+  requireRange("warm_refine_radius", warm_refine_radius, 0, 16);
   requireAtLeast("inner_iterations", inner_iterations, 1);
   requireAtLeast("max_outer_iterations", max_outer_iterations, 1);
   requireAtLeast("max_total_inner_iterations", max_total_inner_iterations, 1);

@@ -38,6 +38,13 @@ constexpr int kAutoPyramidLevels = 5;
 /// Outer steps and relative tolerance of the coarser pyramid levels.
 constexpr int kCoarseOuterSteps = 4;
 constexpr double kCoarseTolerance = 1e-3;
+/// Inner iterations per outer step of a warm start's local refinement: its
+/// pixels start far from their solution (filled in) and gain from frequent
+/// re-linearization.
+constexpr int kRefineStepIterations = 5;
+/// Passes of the fill of a warm start's unknown pixels (each reaches one
+/// pixel further from the known ones).
+constexpr int kFillPasses = 16;
 
 int resolveThreads(int requested) {
   return requested > 0 ? requested : std::max(1, omp_get_num_procs());
@@ -350,15 +357,19 @@ void initializeCold(const PreparedLevel& level, VisibilityMode mode,
 
 /// A warm start's normals made usable: normalized, projected onto the visible
 /// set in soft mode; pixels without one (NaN, zero: e.g. uncovered by a
-/// warp) get the cold start.
+/// warp) get the cold start and unknown = 1 (W * H entries, resized).
 void sanitizeWarmNormals(const PreparedLevel& level, VisibilityMode mode,
-                         PlanarImage& n, int threads) {
+                         PlanarImage& n, std::vector<unsigned char>& unknown,
+                         int threads) {
+  unknown.resize(static_cast<std::size_t>(level.width) * level.height);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < level.height; ++y) {
     for (int x = 0; x < level.width; ++x) {
       float v[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
       const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-      if (!(len > 1e-6f) || !std::isfinite(len)) {
+      const bool missing = !(len > 1e-6f) || !std::isfinite(len);
+      unknown[static_cast<std::size_t>(y) * level.width + x] = missing ? 1 : 0;
+      if (missing) {
         coldNormal(level, mode, x, y, v);
       } else {
         for (float& value : v) value /= len;
@@ -646,10 +657,23 @@ class SolverImpl {
         // Warm start: the previous normals (sanitized) and duals, swapped in
         // rather than copied (same sizes: no allocation either way).
         std::swap(s.n0, out.normals);
-        sanitizeWarmNormals(level, settings_.visibility, s.n0, threads_);
+        sanitizeWarmNormals(level, settings_.visibility, s.n0, unknown_,
+                            threads_);
         std::swap(s.p_h, out.dual_h);
         std::swap(s.p_v, out.dual_v);
         for (int l = 0; l < L; ++l) std::swap(s.q[l], out.dual_data[l]);
+        if (settings_.warm_refine_iterations > 0 &&
+            std::find(unknown_.begin(), unknown_.end(), 1) != unknown_.end()) {
+          active_.build(unknown_, W, H, settings_.warm_refine_radius);
+          // Unknown pixels: filled from their known neighbours; then the
+          // active pixels refined.
+          for (unsigned char& u : unknown_) u = u != 0 ? 0 : 1;  // now: known
+          internal::fillUnknownPixels(
+              level, settings_.huber_eps, settings_.penalty,
+              settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
+              active_, kFillPasses);
+          refineActive(level, s, report);
+        }
       } else {
         if (li + 1 < num_levels) {
           upsampleNormals(coarse_result_, level, settings_.visibility, s.n0);
@@ -679,6 +703,10 @@ class SolverImpl {
  private:
   IterationState state_;
   PlanarImage candidate_;
+  std::vector<unsigned char> unknown_;      ///< pixels the warm start lacked
+  internal::ActiveSet active_;              ///< pixels of the local refinement
+  internal::ActiveBuffers active_buffers_;  ///< their variables, gathered
+  std::vector<float> n_saved_;  ///< the refinement's iterate while normalized
   std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
@@ -718,16 +746,105 @@ class SolverImpl {
     return params;
   }
 
-  /// Majorize-minimize at one level: inner iterations on the tangent plane at
-  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
-  void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
-                SolveReport& report) {
+  /// Step sizes and model constants of the inner iterations at one level.
+  InnerParams innerParams(const PreparedLevel& level) const {
     InnerParams params = stepSizes(level.num_inputs);
     params.huber_eps = static_cast<float>(settings_.huber_eps);
     params.penalty = settings_.penalty;
     params.soft_visibility = settings_.visibility == VisibilityMode::kSoft;
     params.num_threads = threads_;
     params.block_depth = kBlockDepth;
+    return params;
+  }
+
+  /// Local refinement of a warm start (SolverSettings::warm_refine_*):
+  /// majorize-minimize on the active pixels, every other pixel fixed, with
+  /// short outer steps (kRefineStepIterations). A step is kept when the
+  /// active pixels' terms of E do not rise, so E does not; a rejected one
+  /// goes on from its iterate on the same tangent planes.
+  void refineActive(const PreparedLevel& level, IterationState& s,
+                    SolveReport& report) {
+    const InnerParams params = innerParams(level);
+    const bool reference = settings_.backend == SolverBackend::kReference;
+    const std::vector<int>& pixels = active_.pixels;
+    const long count = static_cast<long>(pixels.size());
+    report.refined_pixels = static_cast<int>(count);
+    internal::ActiveBuffers& b = active_buffers_;
+    // Reference: on the images, n = nbar = n0 (everywhere). Fast: gathered.
+    double best = 0.0;
+    if (reference) {
+      s.n = s.n0;
+      s.nbar = s.n0;
+      best = internal::energyActive(level, settings_.huber_eps,
+                                    settings_.penalty, s.n0, active_, threads_);
+    } else {
+      b.gather(level, s, active_);
+      best = b.energy(settings_.huber_eps, settings_.penalty);
+    }
+    if (n_saved_.size() < 3 * pixels.size()) n_saved_.resize(3 * pixels.size());
+    int remaining = settings_.warm_refine_iterations;
+    while (remaining > 0) {
+      const int k = std::min(kRefineStepIterations, remaining);
+      remaining -= k;
+      report.refine_iterations += k;
+      // Inner iterations, then the candidate n / |n| at the active pixels and
+      // its local terms of E.
+      double e = 0.0;
+      if (reference) {
+        internal::runInnerActive(level, params, s, active_, k);
+        for (long j = 0; j < count; ++j) {
+          const int i = pixels[j];
+          float* n[3] = {s.n.plane(0) + i, s.n.plane(1) + i, s.n.plane(2) + i};
+          const float inv =
+              1.0f / std::sqrt(*n[0] * *n[0] + *n[1] * *n[1] + *n[2] * *n[2]);
+          for (int c = 0; c < 3; ++c) {
+            n_saved_[3 * j + c] = *n[c];  // the iterate, if rejected
+            *n[c] *= inv;
+          }
+        }
+        e = internal::energyActive(level, settings_.huber_eps,
+                                   settings_.penalty, s.n, active_, threads_);
+      } else {
+        internal::runInnerActiveFast(level, params, b, k);
+        b.normalizeCandidate();
+        e = b.energy(settings_.huber_eps, settings_.penalty);
+      }
+      const bool accepted = e <= best;
+      const double decrease = (best - e) / std::max(best, 1e-30);
+      if (accepted) {
+        best = e;
+        if (reference) {
+          std::swap(s.n0, s.n);  // s.n (the old n0) equals n0 off the set
+          for (long j = 0; j < count; ++j) {
+            for (int c = 0; c < 3; ++c) {
+              s.n.plane(c)[pixels[j]] = s.nbar.plane(c)[pixels[j]] =
+                  s.n0.plane(c)[pixels[j]];
+            }
+          }
+        } else {
+          b.acceptCandidate();
+        }
+      } else if (reference) {
+        for (long j = 0; j < count; ++j) {
+          for (int c = 0; c < 3; ++c) {
+            s.n.plane(c)[pixels[j]] = n_saved_[3 * j + c];
+          }
+        }
+      }
+      if (accepted && decrease < settings_.relative_tolerance) break;
+      if (has_deadline_ && Clock::now() >= deadline_) {
+        report.budget_exhausted = true;
+        break;
+      }
+    }
+    if (!reference) b.scatter(active_, s);
+  }
+
+  /// Majorize-minimize at one level: inner iterations on the tangent plane at
+  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
+  void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
+                SolveReport& report) {
+    const InnerParams params = innerParams(level);
 
     auto energy_of = [&](const PlanarImage& n) {
       return settings_.backend == SolverBackend::kReference

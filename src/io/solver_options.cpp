@@ -83,6 +83,14 @@ const std::map<std::string, Setter>& setters() {
        [](auto& o, auto& v, auto& s) { s.local_radius = parseInt(o, v); }},
       {"--inner-iterations",
        [](auto& o, auto& v, auto& s) { s.inner_iterations = parseInt(o, v); }},
+      {"--warm-refine-iterations",
+       [](auto& o, auto& v, auto& s) {
+         s.warm_refine_iterations = parseInt(o, v);
+       }},
+      {"--warm-refine-radius",
+       [](auto& o, auto& v, auto& s) {
+         s.warm_refine_radius = parseInt(o, v);
+       }},
       {"--max-outer", [](auto& o, auto& v,
                          auto& s) { s.max_outer_iterations = parseInt(o, v); }},
       {"--max-iterations",
@@ -206,6 +214,11 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << d.relative_tolerance << "]\n"
       << "  --time-budget-ms X    wall-clock budget, 0 = none ["
       << d.time_budget_ms << "]\n"
+      << "  --warm-refine-iterations N  local refinement of a warm start's "
+         "unknown pixels, 0 = off ["
+      << d.warm_refine_iterations << "]\n"
+      << "  --warm-refine-radius N      pixels around them refined too ["
+      << d.warm_refine_radius << "]\n"
       << "  --pyramid-levels N    1 = off, 0 = automatic [" << d.pyramid_levels
       << "]\n"
       << "  --preconditioning on|off  diagonal preconditioning ["

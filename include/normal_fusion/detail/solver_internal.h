@@ -79,6 +79,101 @@ struct IterationState {
   void resize(int width, int height, int num_inputs);
 };
 
+/// The pixels of a local refinement and the links that touch them. Buffers
+/// are reserved for the whole image when its size changes, so a stream of
+/// frames of one size allocates nothing here.
+struct ActiveSet {
+  int width = 0;
+  int height = 0;
+  std::vector<unsigned char> mask;  ///< W * H, 1 = active
+  std::vector<int> pixels;          ///< active pixels (y * W + x), ascending
+  std::vector<int> links_h;  ///< left pixel of each horizontal link with an
+                             ///< active end
+  std::vector<int> links_v;  ///< upper pixel of each vertical link with an
+                             ///< active end
+  std::vector<unsigned char> scratch;
+
+  /// Marks active every pixel within `radius` (Chebyshev distance) of a seed
+  /// (seed[i] != 0, W * H entries) and lists the pixels and links.
+  void build(const std::vector<unsigned char>& seed, int width, int height,
+             int radius);
+  bool empty() const { return pixels.empty(); }
+};
+
+/// Runs `iterations` Chambolle-Pock iterations of the subproblem on the
+/// active pixels, every other pixel held at n (= nbar = n0 there): the duals
+/// of the links that touch an active pixel, the data duals and the primal
+/// step at active pixels, each the reference backend's per-pixel step.
+void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+                    IterationState& state, const ActiveSet& active,
+                    int iterations);
+
+/// Fills the unknown pixels of a warm start (known[i] == 0; all of them in
+/// `active`) inwards from the known ones (known[i] == 1), pass by pass: a pixel
+/// next to a known one takes, among the normals of its known 4-neighbours and
+/// its own observations, the one of the lowest energy terms with those
+/// neighbours; it is then known. Pixels still unknown after `max_passes` keep
+/// their normal.
+void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
+                       DataPenalty penalty, bool soft, PlanarImage& normals,
+                       std::vector<unsigned char>& known,
+                       const ActiveSet& active, int max_passes);
+
+/// The variables of a local refinement gathered into contiguous arrays, one
+/// array per component (the fast path of runInnerActive()). Nodes are the
+/// active pixels [0, P), then the inactive pixels next to them (ghosts, held
+/// at n0). Link `num_links` is a dummy with w = 0 and p = 0 that stands for
+/// a missing link. Vectors only grow, so a steady stream allocates nothing.
+struct ActiveBuffers {
+  int num_inputs = 0;
+  int num_active = 0;  ///< P
+  int num_links = 0;   ///< links [0, num_links_h) horizontal, then vertical
+  int num_links_h = 0;
+  std::vector<int> node_pixel;  ///< pixel of each node (active, then ghosts)
+  std::vector<int> node_of;     ///< W * H: node of each pixel, -1 if none
+  std::array<std::vector<float>, 3> nbar;        ///< per node (ghosts: n0)
+  std::array<std::vector<float>, 3> n, n0, ray;  ///< per active pixel
+  std::vector<float> q, f;  ///< component ch of input l at [(3 l + ch) P + k]
+  std::vector<float> c, delta;  ///< input l at [l P + k]
+  /// Links of each active pixel: to the right, left, below, above (the dummy
+  /// where there is none).
+  std::array<std::vector<int>, 4> pixel_links;
+  std::vector<int> link_a, link_b;      ///< nodes of each link (p of a -> b)
+  std::vector<float> link_w;            ///< w of each link
+  std::array<std::vector<float>, 3> p;  ///< per link
+  std::array<std::vector<float>, 3> d;  ///< scratch: div p - sum q
+  /// Unit normals of the nodes that E is evaluated at: the candidate n / |n|
+  /// (or n0) at the active pixels, n0 at the ghosts.
+  std::array<std::vector<float>, 3> node_n;
+
+  /// Gathers the state at the active pixels (and their links and ghosts);
+  /// n = nbar = n0 there.
+  void gather(const PreparedLevel& level, const IterationState& state,
+              const ActiveSet& active);
+  /// node_n <- n / |n| at the active pixels (the candidate of an outer step).
+  void normalizeCandidate();
+  /// The terms of E that involve an active pixel, at node_n (as
+  /// energyActive()).
+  double energy(double huber_eps, DataPenalty penalty) const;
+  /// n0 <- node_n at the active pixels; n = nbar = n0 (a new outer step).
+  void acceptCandidate();
+  /// Writes n0 (into state.n0) and the duals of the links and data terms
+  /// back.
+  void scatter(const ActiveSet& active, IterationState& state) const;
+};
+
+/// runInnerActive() on gathered buffers: the same steps on contiguous
+/// arrays, vectorised, on up to params.num_threads threads.
+void runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
+                        ActiveBuffers& buffers, int iterations);
+
+/// The terms of E(n) that involve an active pixel: its data terms and the
+/// smoothness terms of the links that touch it (double accumulation). With
+/// the other pixels fixed, E changes exactly as this does.
+double energyActive(const PreparedLevel& level, double huber_eps,
+                    DataPenalty penalty, const PlanarImage& normals,
+                    const ActiveSet& active, int num_threads);
+
 /// Runs `iterations` Chambolle-Pock iterations on the tangent plane at n0.
 /// Reference backend: one plain function per step of the maths.
 void runInnerReference(const PreparedLevel& level, const InnerParams& params,
@@ -139,6 +234,11 @@ void gradient(const PlanarImage& n, PlanarImage& grad_h, PlanarImage& grad_v);
 void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
                 PlanarImage& div);
 void clampVector(float v[3], float radius);
+/// The dual proxes at one pixel, applied to v = p + sigma grad (smoothness,
+/// weight w) or v = q + sigma (nbar - f) (data, weight c, threshold delta).
+void huberDualProx(float v[3], float w, float sigma, float eps);
+void dataDualProx(float v[3], float c_weight, float delta, float sigma,
+                  DataPenalty penalty);
 void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
                    float sigma, float eps);
 /// `delta` may be null (0 everywhere).

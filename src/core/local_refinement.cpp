@@ -1,0 +1,480 @@
+// Local refinement of a warm start: the Chambolle-Pock iteration restricted
+// to a set of active pixels (those the warm start could not predict and their
+// surroundings), every other pixel held fixed. The steps are the reference
+// backend's per-pixel steps, visited through index lists; the work is in
+// proportion to the active pixels, not the image.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "normal_fusion/detail/solver_internal.h"
+
+namespace normal_fusion {
+namespace internal {
+
+void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
+                      int radius) {
+  const std::size_t N = static_cast<std::size_t>(W) * H;
+  if (W != width || H != height) {
+    width = W;
+    height = H;
+    mask.assign(N, 0);
+    scratch.assign(N, 0);
+    pixels.reserve(N);
+    links_h.reserve(N);
+    links_v.reserve(N);
+  }
+  pixels.clear();
+  links_h.clear();
+  links_v.clear();
+  // Dilation by a (2 radius + 1)^2 square, separably: along the rows into
+  // `scratch`, then down the columns into `mask`.
+  for (int y = 0; y < H; ++y) {
+    const unsigned char* in = seed.data() + static_cast<std::size_t>(y) * W;
+    unsigned char* out = scratch.data() + static_cast<std::size_t>(y) * W;
+    int last_seed = -2 * radius - 1;  // latest seed at or left of x (none)
+    for (int x = 0; x < W; ++x) out[x] = 0;
+    for (int x = 0; x < W + radius; ++x) {
+      if (x < W && in[x] != 0) last_seed = x;
+      const int centre = x - radius;
+      if (centre >= 0 && centre < W) {
+        out[centre] = x - last_seed <= 2 * radius ? 1 : 0;
+      }
+    }
+  }
+  for (int y = 0; y < H; ++y) {
+    const int y0 = std::max(0, y - radius), y1 = std::min(H - 1, y + radius);
+    unsigned char* out = mask.data() + static_cast<std::size_t>(y) * W;
+    for (int x = 0; x < W; ++x) out[x] = 0;
+    for (int v = y0; v <= y1; ++v) {
+      const unsigned char* in =
+          scratch.data() + static_cast<std::size_t>(v) * W;
+      for (int x = 0; x < W; ++x) out[x] |= in[x];
+    }
+  }
+  // The active pixels, and each link once: to the right and below an active
+  // pixel, and to the left and above one when that neighbour is inactive.
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const int i = y * W + x;
+      if (mask[i] == 0) continue;
+      pixels.push_back(i);
+      if (x > 0 && mask[i - 1] == 0) links_h.push_back(i - 1);
+      if (x + 1 < W) links_h.push_back(i);
+      if (y > 0 && mask[i - W] == 0) links_v.push_back(i - W);
+      if (y + 1 < H) links_v.push_back(i);
+    }
+  }
+  std::sort(links_h.begin(), links_h.end());
+  std::sort(links_v.begin(), links_v.end());
+}
+
+namespace {
+
+/// Dual step of the weighted Huber term on one link (i to j):
+/// p <- prox(p + sigma (nbar_j - nbar_i)).
+inline void linkDualStep(const PlanarImage& nbar, PlanarImage& p, float w,
+                         float sigma, float eps, int i, int j) {
+  float v[3];
+  for (int c = 0; c < 3; ++c) {
+    const float* nb = nbar.plane(c);
+    v[c] = p.plane(c)[i] + sigma * (nb[j] - nb[i]);
+  }
+  reference::huberDualProx(v, w, sigma, eps);
+  for (int c = 0; c < 3; ++c) p.plane(c)[i] = v[c];
+}
+
+}  // namespace
+
+void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+                    IterationState& s, const ActiveSet& active,
+                    int iterations) {
+  const int W = level.width, H = level.height;
+  const long num_h = static_cast<long>(active.links_h.size());
+  const long num_v = static_cast<long>(active.links_v.size());
+  const long num_px = static_cast<long>(active.pixels.size());
+  const float* w_h = level.edge_weight.plane(0);
+  const float* w_v = level.edge_weight.plane(1);
+#pragma omp parallel num_threads(params.num_threads)
+  for (int it = 0; it < iterations; ++it) {
+    // Dual ascent on the smoothness terms of the links that touch an active
+    // pixel: p_d <- prox(p_d + sigma grad_d nbar).
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < num_h; ++k) {
+      const int i = active.links_h[k];
+      linkDualStep(s.nbar, s.p_h, w_h[i], params.sigma, params.huber_eps, i,
+                   i + 1);
+    }
+#pragma omp for schedule(static)
+    for (long k = 0; k < num_v; ++k) {
+      const int i = active.links_v[k];
+      linkDualStep(s.nbar, s.p_v, w_v[i], params.sigma, params.huber_eps, i,
+                   i + W);
+    }
+#pragma omp for schedule(static)
+    for (long k = 0; k < num_px; ++k) {
+      const int i = active.pixels[k];
+      const int x = i % W, y = i / W;
+      // Dual ascent on each data term: q_l <- prox(q_l + sigma (nbar - f_l)).
+      float q_sum[3] = {0.0f, 0.0f, 0.0f};
+      for (int l = 0; l < level.num_inputs; ++l) {
+        const float c_w = level.data_weight[l].plane(0)[i];
+        float v[3];
+        for (int c = 0; c < 3; ++c) {
+          v[c] = s.q[l].plane(c)[i] +
+                 params.sigma_data *
+                     (s.nbar.plane(c)[i] - level.data[l].plane(c)[i]);
+        }
+        reference::dataDualProx(
+            v, c_w, level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0f,
+            params.sigma_data, params.penalty);
+        for (int c = 0; c < 3; ++c) {
+          s.q[l].plane(c)[i] = v[c];
+          q_sum[c] += v[c];
+        }
+      }
+      // Primal descent: n <- Proj_C(n + tau (div p - sum q)), div the
+      // backward differences of p (0 beyond the image), over-relaxation.
+      float v[3], n0_px[3], r[3], n_old[3];
+      for (int c = 0; c < 3; ++c) {
+        const float* ph = s.p_h.plane(c);
+        const float* pv = s.p_v.plane(c);
+        const float div =
+            (x + 1 < W ? ph[i] : 0.0f) - (x > 0 ? ph[i - 1] : 0.0f) +
+            (y + 1 < H ? pv[i] : 0.0f) - (y > 0 ? pv[i - W] : 0.0f);
+        n_old[c] = s.n.plane(c)[i];
+        n0_px[c] = s.n0.plane(c)[i];
+        v[c] = n_old[c] + params.tau * (div - q_sum[c]);
+      }
+      level.ray(x, y, r);
+      projectTangentFeasible(n0_px, r, params.soft_visibility, v);
+      for (int c = 0; c < 3; ++c) {
+        s.n.plane(c)[i] = v[c];
+        s.nbar.plane(c)[i] = 2.0f * v[c] - n_old[c];
+      }
+    }
+  }
+}
+
+namespace {
+template <typename T>
+void growTo(std::vector<T>& v, std::size_t n) {
+  if (v.size() < n) v.resize(n);
+}
+}  // namespace
+
+void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
+                           const ActiveSet& active) {
+  const int W = level.width, H = level.height;
+  const int L = level.num_inputs;
+  const std::size_t N = static_cast<std::size_t>(W) * H;
+  num_inputs = L;
+  num_active = static_cast<int>(active.pixels.size());
+  const int P = num_active;
+  if (node_of.size() != N) node_of.assign(N, -1);
+  // Nodes: the active pixels, then the ghosts met through the links.
+  node_pixel.clear();
+  for (int i : active.pixels) {
+    node_of[i] = static_cast<int>(node_pixel.size());
+    node_pixel.push_back(i);
+  }
+  auto node = [&](int i) {
+    if (node_of[i] < 0) {
+      node_of[i] = static_cast<int>(node_pixel.size());
+      node_pixel.push_back(i);
+    }
+    return node_of[i];
+  };
+  num_links_h = static_cast<int>(active.links_h.size());
+  num_links = num_links_h + static_cast<int>(active.links_v.size());
+  const std::size_t links = static_cast<std::size_t>(num_links) + 1;
+  growTo(link_a, links);
+  growTo(link_b, links);
+  growTo(link_w, links);
+  for (auto& component : p) growTo(component, links);
+  for (int m = 0; m < num_links; ++m) {
+    const bool horizontal = m < num_links_h;
+    const int i =
+        horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
+    const int j = horizontal ? i + 1 : i + W;
+    const PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+    link_a[m] = node(i);
+    link_b[m] = node(j);
+    link_w[m] = level.edge_weight.plane(horizontal ? 0 : 1)[i];
+    for (int ch = 0; ch < 3; ++ch) p[ch][m] = dual.plane(ch)[i];
+  }
+  // The dummy link: no force.
+  link_a[num_links] = link_b[num_links] = 0;
+  link_w[num_links] = 0.0f;
+  for (int ch = 0; ch < 3; ++ch) p[ch][num_links] = 0.0f;
+  const std::size_t num_nodes = node_pixel.size();
+  for (int ch = 0; ch < 3; ++ch) {
+    growTo(nbar[ch], num_nodes);
+    growTo(n[ch], P);
+    growTo(n0[ch], P);
+    growTo(ray[ch], P);
+    growTo(d[ch], P);
+  }
+  for (int ch = 0; ch < 3; ++ch) growTo(node_n[ch], num_nodes);
+  for (std::size_t k = 0; k < num_nodes; ++k) {
+    // Every node starts at n0 (ghosts stay there).
+    for (int ch = 0; ch < 3; ++ch) {
+      nbar[ch][k] = node_n[ch][k] = s.n0.plane(ch)[node_pixel[k]];
+    }
+  }
+  growTo(q, static_cast<std::size_t>(3) * L * P);
+  growTo(f, static_cast<std::size_t>(3) * L * P);
+  growTo(c, static_cast<std::size_t>(L) * P);
+  growTo(delta, static_cast<std::size_t>(L) * P);
+  for (auto& list : pixel_links) growTo(list, P);
+  for (int k = 0; k < P; ++k) {
+    const int i = node_pixel[k];
+    float r[3];
+    level.ray(i % W, i / W, r);
+    for (int ch = 0; ch < 3; ++ch) {
+      n[ch][k] = n0[ch][k] = s.n0.plane(ch)[i];
+      ray[ch][k] = r[ch];
+    }
+    for (int l = 0; l < L; ++l) {
+      for (int ch = 0; ch < 3; ++ch) {
+        q[(3 * l + ch) * P + k] = s.q[l].plane(ch)[i];
+        f[(3 * l + ch) * P + k] = level.data[l].plane(ch)[i];
+      }
+      c[l * P + k] = level.data_weight[l].plane(0)[i];
+      delta[l * P + k] =
+          level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0f;
+    }
+    for (auto& list : pixel_links) list[k] = num_links;
+  }
+  // Each link is the right (below) link of its first node and the left
+  // (above) link of its second.
+  for (int m = 0; m < num_links; ++m) {
+    const int side = m < num_links_h ? 0 : 2;
+    if (link_a[m] < P) pixel_links[side][link_a[m]] = m;
+    if (link_b[m] < P) pixel_links[side + 1][link_b[m]] = m;
+  }
+  for (std::size_t k = 0; k < num_nodes; ++k) node_of[node_pixel[k]] = -1;
+}
+
+void ActiveBuffers::normalizeCandidate() {
+  for (int k = 0; k < num_active; ++k) {
+    const float inv = 1.0f / std::sqrt(n[0][k] * n[0][k] + n[1][k] * n[1][k] +
+                                       n[2][k] * n[2][k]);
+    for (int ch = 0; ch < 3; ++ch) node_n[ch][k] = n[ch][k] * inv;
+  }
+}
+
+void ActiveBuffers::acceptCandidate() {
+  for (int ch = 0; ch < 3; ++ch) {
+    for (int k = 0; k < num_active; ++k) {
+      n0[ch][k] = n[ch][k] = nbar[ch][k] = node_n[ch][k];
+    }
+  }
+}
+
+void ActiveBuffers::scatter(const ActiveSet& active, IterationState& s) const {
+  const int L = num_inputs, P = num_active;
+  for (int k = 0; k < P; ++k) {
+    const int i = node_pixel[k];
+    for (int ch = 0; ch < 3; ++ch) {
+      s.n0.plane(ch)[i] = n0[ch][k];
+      for (int l = 0; l < L; ++l) {
+        s.q[l].plane(ch)[i] = q[(3 * l + ch) * P + k];
+      }
+    }
+  }
+  for (int m = 0; m < num_links; ++m) {
+    const bool horizontal = m < num_links_h;
+    const int i =
+        horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
+    PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+    for (int ch = 0; ch < 3; ++ch) dual.plane(ch)[i] = p[ch][m];
+  }
+}
+
+double energyActive(const PreparedLevel& level, double huber_eps,
+                    DataPenalty penalty, const PlanarImage& normals,
+                    const ActiveSet& active, int num_threads) {
+  const int W = level.width;
+  const double eps = huber_eps;
+  auto huber = [eps](double z) {
+    return z < eps ? z * z / (2.0 * eps) : z - 0.5 * eps;
+  };
+  // w huber(|n_j - n_i|) of one link.
+  auto link = [&](const float* w, int i, int j) {
+    double g2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double g =
+          static_cast<double>(normals.plane(c)[j]) - normals.plane(c)[i];
+      g2 += g * g;
+    }
+    return w[i] * huber(std::sqrt(g2));
+  };
+  const long num_h = static_cast<long>(active.links_h.size());
+  const long num_v = static_cast<long>(active.links_v.size());
+  const long num_px = static_cast<long>(active.pixels.size());
+  double total = 0.0;
+#pragma omp parallel num_threads(num_threads) reduction(+ : total)
+  {
+    // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n) of each link.
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < num_h; ++k) {
+      const int i = active.links_h[k];
+      total += link(level.edge_weight.plane(0), i, i + 1);
+    }
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < num_v; ++k) {
+      const int i = active.links_v[k];
+      total += link(level.edge_weight.plane(1), i, i + W);
+    }
+    // Data terms: sum_l c_l phi(n - f_l) at each active pixel.
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < num_px; ++k) {
+      const int i = active.pixels[k];
+      for (int l = 0; l < level.num_inputs; ++l) {
+        const double c_w = level.data_weight[l].plane(0)[i];
+        if (c_w <= 0.0) continue;
+        double d2 = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          const double d = static_cast<double>(normals.plane(c)[i]) -
+                           level.data[l].plane(c)[i];
+          d2 += d * d;
+        }
+        if (penalty == DataPenalty::kSquaredL2) {
+          total += c_w * 0.5 * d2;
+          continue;
+        }
+        const double z = std::sqrt(d2);
+        const double delta =
+            level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0;
+        total += c_w * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
+      }
+    }
+  }
+  return total;
+}
+
+namespace {
+
+/// The terms of E that involve pixel i when it holds the unit normal v: its
+/// data terms and the links to its 4-neighbours j with use[j] == 1 (the
+/// others left out).
+double pixelEnergy(const PreparedLevel& level, double huber_eps,
+                   DataPenalty penalty, const PlanarImage& normals,
+                   const unsigned char* use, int i, const float v[3]) {
+  const int W = level.width, H = level.height;
+  const int x = i % W, y = i / W;
+  double total = 0.0;
+  for (int l = 0; l < level.num_inputs; ++l) {
+    const double c_w = level.data_weight[l].plane(0)[i];
+    if (c_w <= 0.0) continue;
+    double d2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = static_cast<double>(v[c]) - level.data[l].plane(c)[i];
+      d2 += d * d;
+    }
+    if (penalty == DataPenalty::kSquaredL2) {
+      total += c_w * 0.5 * d2;
+      continue;
+    }
+    const double z = std::sqrt(d2);
+    const double delta = level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0;
+    total += c_w * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
+  }
+  // w huber(|v - n_j|) of the link between i and j, weight w_h or w_v at the
+  // link's left or upper pixel.
+  auto link = [&](int j, float w) {
+    if (use[j] != 1) return;
+    double g2 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double g = static_cast<double>(normals.plane(c)[j]) - v[c];
+      g2 += g * g;
+    }
+    const double z = std::sqrt(g2);
+    total +=
+        w * (z < huber_eps ? z * z / (2.0 * huber_eps) : z - 0.5 * huber_eps);
+  };
+  const float* w_h = level.edge_weight.plane(0);
+  const float* w_v = level.edge_weight.plane(1);
+  if (x > 0) link(i - 1, w_h[i - 1]);
+  if (x + 1 < W) link(i + 1, w_h[i]);
+  if (y > 0) link(i - W, w_v[i - W]);
+  if (y + 1 < H) link(i + W, w_v[i]);
+  return total;
+}
+
+/// Pixel i takes, among the normals of its 4-neighbours j with use[j] == 1 and
+/// each input's observation (projected onto the visible set in soft mode),
+/// the one of lowest pixelEnergy(); it keeps its normal if there is none.
+void chooseCandidate(const PreparedLevel& level, double huber_eps,
+                     DataPenalty penalty, bool soft, PlanarImage& normals,
+                     const unsigned char* use, int i) {
+  const int W = level.width, H = level.height;
+  const int x = i % W, y = i / W;
+  float r[3];
+  level.ray(x, y, r);
+  float best_v[3] = {normals.plane(0)[i], normals.plane(1)[i],
+                     normals.plane(2)[i]};
+  double best = std::numeric_limits<double>::infinity();
+  auto consider = [&](float v[3]) {
+    if (soft) projectVisible(r, v);
+    const double e = pixelEnergy(level, huber_eps, penalty, normals, use, i, v);
+    if (e < best) {
+      best = e;
+      for (int c = 0; c < 3; ++c) best_v[c] = v[c];
+    }
+  };
+  const int neighbours[4] = {x > 0 ? i - 1 : -1, x + 1 < W ? i + 1 : -1,
+                             y > 0 ? i - W : -1, y + 1 < H ? i + W : -1};
+  for (int j : neighbours) {
+    if (j < 0 || use[j] != 1) continue;
+    float v[3] = {normals.plane(0)[j], normals.plane(1)[j],
+                  normals.plane(2)[j]};
+    consider(v);
+  }
+  for (int l = 0; l < level.num_inputs; ++l) {
+    if (!(level.data_weight[l].plane(0)[i] > 0.0f)) continue;
+    float v[3] = {level.data[l].plane(0)[i], level.data[l].plane(1)[i],
+                  level.data[l].plane(2)[i]};
+    consider(v);
+  }
+  for (int c = 0; c < 3; ++c) normals.plane(c)[i] = best_v[c];
+}
+
+}  // namespace
+
+void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
+                       DataPenalty penalty, bool soft, PlanarImage& normals,
+                       std::vector<unsigned char>& known,
+                       const ActiveSet& active, int max_passes) {
+  const int W = level.width, H = level.height;
+  // Pass by pass inwards from the known pixels: an unknown pixel with a known
+  // 4-neighbour (known before this pass) takes its best candidate.
+  for (int pass = 0; pass < max_passes; ++pass) {
+    bool any_left = false, any_filled = false;
+    for (int i : active.pixels) {
+      if (known[i] != 0) continue;
+      const int x = i % W, y = i / W;
+      const bool next_to_known =
+          (x > 0 && known[i - 1] == 1) || (x + 1 < W && known[i + 1] == 1) ||
+          (y > 0 && known[i - W] == 1) || (y + 1 < H && known[i + W] == 1);
+      if (!next_to_known) {
+        any_left = true;
+        continue;
+      }
+      chooseCandidate(level, huber_eps, penalty, soft, normals, known.data(),
+                      i);
+      known[i] = 2;  // filled in this pass: a neighbour from the next one on
+      any_filled = true;
+    }
+    for (int i : active.pixels) {
+      if (known[i] == 2) known[i] = 1;
+    }
+    if (!any_left || !any_filled) break;
+  }
+}
+
+}  // namespace internal
+}  // namespace normal_fusion
