@@ -2,6 +2,7 @@
 // no heap allocation inside the solver (counted by replacing operator new).
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -9,6 +10,7 @@
 #include <new>
 
 #include "normal_fusion/solver.h"
+#include "normal_fusion/warp.h"
 #include "test_util.h"
 
 namespace {
@@ -75,6 +77,51 @@ TEST(Allocations, NonePerFrameOnceRunning) {
       // The counter works: a cold solve into a fresh state allocates.
       EXPECT_GT(allocationsDuring([&] { solver.solve(problem); }), 0);
     }
+  }
+}
+
+/// Warm starts warped from frame to frame leave unknown pixels (a strip
+/// entering the view, edges of the map): the local refinement allocates
+/// nothing either once running.
+TEST(Allocations, NonePerWarpedFrameWithLocalRefinement) {
+  for (SolverBackend backend :
+       {SolverBackend::kFast, SolverBackend::kReference}) {
+    NormalMap gt;
+    FusionProblem problem = test::cylinderScene(96, 64, &gt);
+    for (std::uint64_t l = 0; l < 2; ++l) {
+      NormalInput input;
+      input.normals = test::noisy(gt, 0.3, 5 + l);
+      problem.inputs.push_back(input);
+    }
+    SolverSettings settings;
+    settings.backend = backend;
+    settings.max_total_inner_iterations = 20;
+    settings.num_threads = 2;
+    Solver solver(settings);
+    SolverState state;
+    SolveReport report;
+    // 0.5 degrees about the y axis per frame, alternating in sign (so that
+    // the strip moves from side to side).
+    const double a = 0.5 * 3.14159265358979 / 180.0;
+    auto warp = [&](int frame) {
+      const double s = (frame % 2 == 0 ? 1.0 : -1.0) * std::sin(a);
+      const std::array<double, 9> R = {std::cos(a), 0, s, 0, 1, 0,
+                                       -s,          0, std::cos(a)};
+      warpStateByRotation(state, problem.K, R);
+    };
+    solver.solve(problem, state, false, report);
+    for (int frame = 0; frame < 4; ++frame) {
+      warp(frame);
+      solver.solve(problem, state, true, report);
+    }
+    long count = 0;
+    for (int frame = 0; frame < 4; ++frame) {
+      warp(frame);
+      count += allocationsDuring(
+          [&] { solver.solve(problem, state, true, report); });
+      EXPECT_GT(report.refined_pixels, 0);
+    }
+    EXPECT_EQ(count, 0) << "backend " << toString(backend);
   }
 }
 
