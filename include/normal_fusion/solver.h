@@ -48,8 +48,11 @@ struct SolveReport {
       0;                      ///< iterations on the coarser pyramid levels
   int refined_pixels = 0;     ///< pixels of the warm start's local refinement
   int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
-  std::vector<double> energies;  ///< E at the finest level: start, then each
-                                 ///< accepted outer step
+  /// E at the finest level: start, then each accepted outer step. Empty
+  /// (and initial_energy, final_energy NaN) when a warm start's local
+  /// refinement used up the time budget, so that the whole-image step was
+  /// left out.
+  std::vector<double> energies;
   std::vector<double> energy_seconds;  ///< when each of `energies` was reached,
                                        ///< since the solve began
   double initial_energy = 0.0;

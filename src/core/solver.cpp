@@ -174,6 +174,74 @@ void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
   }
 }
 
+namespace {
+
+/// Adds one row of f (3 planes) and its validity (f != 0) to the column sums.
+void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
+                const float* __restrict fz, float* __restrict sx,
+                float* __restrict sy, float* __restrict sz,
+                float* __restrict count) {
+  for (int x = 0; x < W; ++x) {
+    sx[x] += fx[x];
+    sy[x] += fy[x];
+    sz[x] += fz[x];
+    count[x] +=
+        fx[x] * fx[x] + fy[x] * fy[x] + fz[x] * fz[x] > 0.0f ? 1.0f : 0.0f;
+  }
+}
+
+/// out(x) = sum of in(u), u = x - r .. x + r inside the row.
+void windowSums(int W, int r, const float* __restrict in,
+                float* __restrict out) {
+  auto border = [&](int x) {
+    float sum = 0.0f;
+    for (int u = std::max(0, x - r); u <= std::min(W - 1, x + r); ++u) {
+      sum += in[u];
+    }
+    out[x] = sum;
+  };
+  const int lo = std::min(r, W), hi = std::max(lo, W - r);
+  for (int x = 0; x < lo; ++x) border(x);
+  for (int x = hi; x < W; ++x) border(x);
+  // Interior: whole windows, one shifted row at a time (vectorised).
+  for (int x = lo; x < hi; ++x) out[x] = in[x - r];
+  for (int d = 1 - r; d <= r; ++d) {
+    for (int x = lo; x < hi; ++x) out[x] += in[x + d];
+  }
+}
+
+/// The thresholds delta and the density ratios of one row from its window
+/// sums (resultant s, valid count n) and the window's row count. Branch-free
+/// (vectorised).
+void localStatisticsRow(int W, int r, int rows, float eps_global,
+                        float eps_local, const float* __restrict sx,
+                        const float* __restrict sy, const float* __restrict sz,
+                        const float* __restrict count,
+                        const float* __restrict c, float* __restrict delta,
+                        float* __restrict ratio) {
+  for (int x = 0; x < W; ++x) {
+    const float n = count[x];
+    const float window = static_cast<float>(
+        rows * (std::min(W - 1, x + r) - std::max(0, x - r) + 1));
+    // s = sqrt(2 (1 - R)), R = |sum f| / count: mean |f - m|^2 = 2 (1 - R)
+    // for unit vectors around their normalized mean m; 0 below 2 samples.
+    const float R = std::sqrt(sx[x] * sx[x] + sy[x] * sy[x] + sz[x] * sz[x]) /
+                    std::max(n, 1.0f);
+    const float spread = std::sqrt(std::max(0.0f, 2.0f * (1.0f - R))) *
+                         (n >= 2.0f ? 1.0f : 0.0f);
+    // delta(x) = data_eps + data_eps_local * s(x), at most 2 (the largest
+    // distance of unit vectors).
+    delta[x] = std::min(2.0f, eps_global + eps_local * spread);
+    // window / count where the density correction applies (c > 0,
+    // 0 < n < window), else 1.
+    const float applies =
+        (c[x] > 0.0f) & (n > 0.0f) & (n < window) ? 1.0f : 0.0f;
+    ratio[x] = 1.0f + applies * (window / std::max(n, 1.0f) - 1.0f);
+  }
+}
+
+}  // namespace
+
 void applyLocalStatistics(const SolverSettings& settings,
                           const PlanarImage& data, PlanarImage& data_eps,
                           PlanarImage& data_weight, int threads) {
@@ -190,38 +258,46 @@ void applyLocalStatistics(const SolverSettings& settings,
   float* delta = data_eps.plane(0);
   float* c = data_weight.plane(0);
   if (!huber && !density) return;
-#pragma omp parallel for num_threads(threads) schedule(static)
-  for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      // Resultant of the valid f(y) in the window (f = 0 where missing).
-      float sx = 0.0f, sy = 0.0f, sz = 0.0f;
-      int count = 0, window = 0;
-      for (int v = std::max(0, y - r); v <= std::min(H - 1, y + r); ++v) {
-        for (int u = std::max(0, x - r); u <= std::min(W - 1, x + r); ++u) {
-          ++window;
-          const std::size_t j = static_cast<std::size_t>(v) * W + u;
-          if (fx[j] == 0.0f && fy[j] == 0.0f && fz[j] == 0.0f) continue;
-          sx += fx[j];
-          sy += fy[j];
-          sz += fz[j];
-          ++count;
-        }
+#pragma omp parallel num_threads(threads)
+  {
+    // Per thread: window sums of f and of the valid count, down the columns
+    // (col_*) and then along the row (win_*); grown once, then reused.
+    thread_local std::vector<float> scratch;
+    if (scratch.size() < 10 * static_cast<std::size_t>(W)) {
+      scratch.resize(10 * static_cast<std::size_t>(W));
+    }
+    float* ratio = scratch.data() + 8 * W;
+    float* unused_delta = scratch.data() + 9 * W;
+    float* col[4] = {scratch.data(), scratch.data() + W, scratch.data() + 2 * W,
+                     scratch.data() + 3 * W};
+    float* win[4] = {scratch.data() + 4 * W, scratch.data() + 5 * W,
+                     scratch.data() + 6 * W, scratch.data() + 7 * W};
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; ++y) {
+      const int y0 = std::max(0, y - r), y1 = std::min(H - 1, y + r);
+      // Resultant of the valid f in the window (f = 0 where missing) and
+      // their count, separably: the rows y0 .. y1 summed per column ...
+      for (int k = 0; k < 4; ++k) std::fill(col[k], col[k] + W, 0.0f);
+      for (int v = y0; v <= y1; ++v) {
+        const std::size_t off = static_cast<std::size_t>(v) * W;
+        columnSums(W, fx + off, fy + off, fz + off, col[0], col[1], col[2],
+                   col[3]);
       }
-      // s = sqrt(2 (1 - R)), R = |sum f| / count: mean |f - m|^2 = 2 (1 - R)
-      // for unit vectors around their normalized mean m.
-      float spread = 0.0f;
-      if (count >= 2) {
-        const float R = std::sqrt(sx * sx + sy * sy + sz * sz) / count;
-        spread = std::sqrt(std::max(0.0f, 2.0f * (1.0f - R)));
-      }
-      // delta(x) = data_eps + data_eps_local * s(x), at most 2 (the largest
-      // distance of unit vectors).
-      if (huber) delta[i] = std::min(2.0f, eps_global + eps_local * spread);
+      // ... then the columns x - r .. x + r.
+      for (int k = 0; k < 4; ++k) windowSums(W, r, col[k], win[k]);
+      const std::size_t off = static_cast<std::size_t>(y) * W;
+      // delta (written when the data terms use it) and the ratios.
+      float* delta_row = huber ? delta + off : unused_delta;
+      localStatisticsRow(W, r, y1 - y0 + 1, eps_global, eps_local, win[0],
+                         win[1], win[2], win[3], c + off, delta_row, ratio);
       // c(x) *= (window / count)^density_power: a sample of a sparse input
       // speaks for the pixels around it that the input misses.
-      if (density && c[i] > 0.0f && count > 0 && count < window) {
-        c[i] *= std::pow(static_cast<float>(window) / count, density_power);
+      if (density_power == 1.0f) {
+        for (int x = 0; x < W; ++x) c[off + x] *= ratio[x];
+      } else if (density) {
+        for (int x = 0; x < W; ++x) {
+          if (ratio[x] != 1.0f) c[off + x] *= std::pow(ratio[x], density_power);
+        }
       }
     }
   }
@@ -684,7 +760,13 @@ class SolverImpl {
         s.p_v.fill(0.0f);
         for (PlanarImage& q : s.q) q.fill(0.0f);
       }
-      runLevel(level, s, finest_level, report);
+      if (finest_level && use_warm && !levelFits()) {
+        // The budget went to the local refinement: the whole-image step
+        // would overrun it (its energies are then not measured).
+        report.budget_exhausted = true;
+      } else {
+        runLevel(level, s, finest_level, report);
+      }
       if (!finest_level) coarse_result_ = s.n0;
     }
 
@@ -695,7 +777,12 @@ class SolverImpl {
     std::swap(out.dual_v, s.p_v);
     out.dual_data.resize(L);
     for (int l = 0; l < L; ++l) std::swap(out.dual_data[l], s.q[l]);
-    report.final_energy = report.energies.back();
+    if (report.energies.empty()) {
+      report.initial_energy = report.final_energy =
+          std::numeric_limits<double>::quiet_NaN();
+    } else {
+      report.final_energy = report.energies.back();
+    }
     report.seconds =
         std::chrono::duration<double>(Clock::now() - start).count();
   }
@@ -706,6 +793,7 @@ class SolverImpl {
   std::vector<unsigned char> unknown_;      ///< pixels the warm start lacked
   internal::ActiveSet active_;              ///< pixels of the local refinement
   internal::ActiveBuffers active_buffers_;  ///< their variables, gathered
+  double level_seconds_ = 0.0;  ///< least cost of the finest level, measured
   std::vector<float> n_saved_;  ///< the refinement's iterate while normalized
   std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
   PlanarImage coarse_result_;
@@ -757,6 +845,15 @@ class SolverImpl {
     return params;
   }
 
+  /// False when a time budget is set and what is left of it is less than the
+  /// least the finest level took last time (unknown before one ran: true).
+  bool levelFits() const {
+    if (!has_deadline_) return true;
+    const double left =
+        std::chrono::duration<double>(deadline_ - Clock::now()).count();
+    return left >= level_seconds_;
+  }
+
   /// Local refinement of a warm start (SolverSettings::warm_refine_*):
   /// majorize-minimize on the active pixels, every other pixel fixed, with
   /// short outer steps (kRefineStepIterations). A step is kept when the
@@ -783,7 +880,16 @@ class SolverImpl {
     }
     if (n_saved_.size() < 3 * pixels.size()) n_saved_.resize(3 * pixels.size());
     int remaining = settings_.warm_refine_iterations;
+    double step_seconds = 0.0;  // what the last outer step took
     while (remaining > 0) {
+      const Clock::time_point step_start = Clock::now();
+      if (has_deadline_ &&
+          step_start + std::chrono::duration_cast<Clock::duration>(
+                           std::chrono::duration<double>(step_seconds)) >
+              deadline_) {
+        report.budget_exhausted = true;
+        break;
+      }
       const int k = std::min(kRefineStepIterations, remaining);
       remaining -= k;
       report.refine_iterations += k;
@@ -832,10 +938,8 @@ class SolverImpl {
         }
       }
       if (accepted && decrease < settings_.relative_tolerance) break;
-      if (has_deadline_ && Clock::now() >= deadline_) {
-        report.budget_exhausted = true;
-        break;
-      }
+      step_seconds =
+          std::chrono::duration<double>(Clock::now() - step_start).count();
     }
     if (!reference) b.scatter(active_, s);
   }
@@ -858,6 +962,7 @@ class SolverImpl {
     };
     const Clock::time_point level_start = Clock::now();
     double best = energy_of(s.n0);
+    const double energy_seconds = seconds_since(level_start);
     // What closing an outer step costs (normalize + energy), for the budget.
     double finish_seconds = 1.5 * seconds_since(level_start);
     if (finest) {
@@ -927,6 +1032,12 @@ class SolverImpl {
       normalizeInto(s.n, candidate_, threads_);
       const double e = energy_of(candidate_);
       finish_seconds = seconds_since(finish_start);
+      if (finest) {
+        // The least a finest level costs: its first energy, one iteration
+        // and one closing step.
+        level_seconds_ =
+            energy_seconds + seconds_per_iteration + finish_seconds;
+      }
       bool converged = false;
       if (e <= best) {
         const double decrease = (best - e) / std::max(best, 1e-30);

@@ -105,8 +105,8 @@ TEST(Allocations, NonePerWarpedFrameWithLocalRefinement) {
     const double a = 0.5 * 3.14159265358979 / 180.0;
     auto warp = [&](int frame) {
       const double s = (frame % 2 == 0 ? 1.0 : -1.0) * std::sin(a);
-      const std::array<double, 9> R = {std::cos(a), 0, s, 0, 1, 0,
-                                       -s,          0, std::cos(a)};
+      const std::array<double, 9> R = {std::cos(a), 0,  s, 0,          1,
+                                       0,           -s, 0, std::cos(a)};
       warpStateByRotation(state, problem.K, R);
     };
     solver.solve(problem, state, false, report);
