@@ -45,9 +45,10 @@ struct SolveReport {
       0;  ///< steps whose normalized result raised E (kept n0)
   int inner_iterations = 0;  ///< Chambolle-Pock iterations at the finest level
   int coarse_inner_iterations =
-      0;                      ///< iterations on the coarser pyramid levels
-  int refined_pixels = 0;     ///< pixels of the warm start's local refinement
-  int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
+      0;                        ///< iterations on the coarser pyramid levels
+  int inconsistent_pixels = 0;  ///< warm-start pixels the inputs contradict
+  int refined_pixels = 0;       ///< pixels of the warm start's local refinement
+  int refine_iterations = 0;    ///< its inner iterations (on those pixels only)
   /// E at the finest level: start, then each accepted outer step. Empty
   /// (and initial_energy, final_energy NaN) when a warm start's local
   /// refinement used up the time budget, so that the whole-image step was

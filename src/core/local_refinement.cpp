@@ -405,9 +405,10 @@ double pixelEnergy(const PreparedLevel& level, double huber_eps,
   return total;
 }
 
-/// Pixel i takes, among the normals of its 4-neighbours j with use[j] == 1 and
-/// each input's observation (projected onto the visible set in soft mode),
-/// the one of lowest pixelEnergy(); it keeps its normal if there is none.
+/// Pixel i takes, among the normals of its 4-neighbours j with use[j] == 1,
+/// each input's observation and its window mean (projected onto the visible
+/// set in soft mode), the one of lowest pixelEnergy(); it keeps its normal if
+/// there is none.
 void chooseCandidate(const PreparedLevel& level, double huber_eps,
                      DataPenalty penalty, bool soft, PlanarImage& normals,
                      const unsigned char* use, int i) {
@@ -439,6 +440,14 @@ void chooseCandidate(const PreparedLevel& level, double huber_eps,
     float v[3] = {level.data[l].plane(0)[i], level.data[l].plane(1)[i],
                   level.data[l].plane(2)[i]};
     consider(v);
+    // The input's window mean, when there is one.
+    if (l < static_cast<int>(level.data_mean.size()) &&
+        level.data_mean[l].plane(3)[i] >= 0.0f) {
+      float m[3] = {level.data_mean[l].plane(0)[i],
+                    level.data_mean[l].plane(1)[i],
+                    level.data_mean[l].plane(2)[i]};
+      consider(m);
+    }
   }
   for (int c = 0; c < 3; ++c) normals.plane(c)[i] = best_v[c];
 }
@@ -474,6 +483,46 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
     }
     if (!any_left || !any_filled) break;
   }
+}
+
+int markInconsistentPixels(const PreparedLevel& level,
+                           const PlanarImage& normals, int local_radius,
+                           std::vector<unsigned char>& unknown, int threads) {
+  const int L = static_cast<int>(level.data_mean.size());
+  const long N = static_cast<long>(level.width) * level.height;
+  const float chord = static_cast<float>(
+      2.0 * std::sin(0.5 * kInconsistentDegrees * 3.14159265358979 / 180.0));
+  // Two standard errors of a full window's mean per unit of spread.
+  const float standard_errors = 2.0f / (2 * local_radius + 1);
+  long marked = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : marked)
+  for (long i = 0; i < N; ++i) {
+    if (unknown[i] != 0) continue;
+    // Every input that observes the pixel (with a spread in its window) must
+    // contradict it: one input's artifacts do not count.
+    int observing = 0, contradicting = 0;
+    for (int l = 0; l < L; ++l) {
+      const PlanarImage& m = level.data_mean[l];
+      const float spread = m.plane(3)[i];
+      if (!(level.data_weight[l].plane(0)[i] > 0.0f) || spread < 0.0f) {
+        continue;
+      }
+      // |n - m_l| against chord + 2 s_l / sqrt(window).
+      float d2 = 0.0f;
+      for (int c = 0; c < 3; ++c) {
+        const float d = normals.plane(c)[i] - m.plane(c)[i];
+        d2 += d * d;
+      }
+      const float limit = chord + standard_errors * spread;
+      ++observing;
+      if (d2 > limit * limit) ++contradicting;
+    }
+    if (observing > 0 && contradicting == observing) {
+      unknown[i] = 1;
+      ++marked;
+    }
+  }
+  return static_cast<int>(marked);
 }
 
 }  // namespace internal

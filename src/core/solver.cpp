@@ -142,10 +142,14 @@ void prepareFinestInto(const FusionProblem& problem,
   // (unsquared penalty only) and the density correction of the weights.
   level.data_huber = usesDataHuber(settings);
   level.data_eps.resize(level.num_inputs);
+  const bool means = settings.warm_refine_iterations > 0;
+  level.data_mean.resize(means ? level.num_inputs : 0);
   for (int l = 0; l < level.num_inputs; ++l) {
     level.data_eps[l].resize(W, H, 1);
+    if (means) level.data_mean[l].resize(W, H, 4);
     applyLocalStatistics(settings, level.data[l], level.data_eps[l],
-                         level.data_weight[l], threads);
+                         level.data_weight[l],
+                         means ? &level.data_mean[l] : nullptr, threads);
   }
 }
 
@@ -210,15 +214,15 @@ void windowSums(int W, int r, const float* __restrict in,
   }
 }
 
-/// The thresholds delta and the density ratios of one row from its window
-/// sums (resultant s, valid count n) and the window's row count. Branch-free
-/// (vectorised).
+/// The thresholds delta, the density ratios and the spreads (-1 below 2
+/// samples) of one row from its window sums (resultant s, valid count n) and
+/// the window's row count. Branch-free (vectorised).
 void localStatisticsRow(int W, int r, int rows, float eps_global,
                         float eps_local, const float* __restrict sx,
                         const float* __restrict sy, const float* __restrict sz,
                         const float* __restrict count,
                         const float* __restrict c, float* __restrict delta,
-                        float* __restrict ratio) {
+                        float* __restrict ratio, float* __restrict spread_out) {
   for (int x = 0; x < W; ++x) {
     const float n = count[x];
     const float window = static_cast<float>(
@@ -232,6 +236,7 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
     // delta(x) = data_eps + data_eps_local * s(x), at most 2 (the largest
     // distance of unit vectors).
     delta[x] = std::min(2.0f, eps_global + eps_local * spread);
+    spread_out[x] = n >= 2.0f ? spread : -1.0f;
     // window / count where the density correction applies (c > 0,
     // 0 < n < window), else 1.
     const float applies =
@@ -244,7 +249,8 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
 
 void applyLocalStatistics(const SolverSettings& settings,
                           const PlanarImage& data, PlanarImage& data_eps,
-                          PlanarImage& data_weight, int threads) {
+                          PlanarImage& data_weight, PlanarImage* mean_spread,
+                          int threads) {
   const int W = data.width(), H = data.height();
   const int r = settings.local_radius;
   const bool huber = usesDataHuber(settings);
@@ -257,17 +263,18 @@ void applyLocalStatistics(const SolverSettings& settings,
   const float* fz = data.plane(2);
   float* delta = data_eps.plane(0);
   float* c = data_weight.plane(0);
-  if (!huber && !density) return;
+  if (!huber && !density && mean_spread == nullptr) return;
 #pragma omp parallel num_threads(threads)
   {
     // Per thread: window sums of f and of the valid count, down the columns
     // (col_*) and then along the row (win_*); grown once, then reused.
     thread_local std::vector<float> scratch;
-    if (scratch.size() < 10 * static_cast<std::size_t>(W)) {
-      scratch.resize(10 * static_cast<std::size_t>(W));
+    if (scratch.size() < 11 * static_cast<std::size_t>(W)) {
+      scratch.resize(11 * static_cast<std::size_t>(W));
     }
     float* ratio = scratch.data() + 8 * W;
     float* unused_delta = scratch.data() + 9 * W;
+    float* spread = scratch.data() + 10 * W;
     float* col[4] = {scratch.data(), scratch.data() + W, scratch.data() + 2 * W,
                      scratch.data() + 3 * W};
     float* win[4] = {scratch.data() + 4 * W, scratch.data() + 5 * W,
@@ -289,7 +296,23 @@ void applyLocalStatistics(const SolverSettings& settings,
       // delta (written when the data terms use it) and the ratios.
       float* delta_row = huber ? delta + off : unused_delta;
       localStatisticsRow(W, r, y1 - y0 + 1, eps_global, eps_local, win[0],
-                         win[1], win[2], win[3], c + off, delta_row, ratio);
+                         win[1], win[2], win[3], c + off, delta_row, ratio,
+                         spread);
+      // The normalized window mean m and the spread s, before the density
+      // correction changes c (0 and -1 where there is none).
+      if (mean_spread != nullptr) {
+        float* m[4] = {mean_spread->plane(0) + off, mean_spread->plane(1) + off,
+                       mean_spread->plane(2) + off,
+                       mean_spread->plane(3) + off};
+        for (int x = 0; x < W; ++x) {
+          const float len =
+              std::sqrt(win[0][x] * win[0][x] + win[1][x] * win[1][x] +
+                        win[2][x] * win[2][x]);
+          const float inv = len > 1e-6f ? 1.0f / len : 0.0f;
+          for (int k = 0; k < 3; ++k) m[k][x] = win[k][x] * inv;
+          m[3][x] = len > 1e-6f ? spread[x] : -1.0f;
+        }
+      }
       // c(x) *= (window / count)^density_power: a sample of a sparse input
       // speaks for the pixels around it that the input misses.
       if (density_power == 1.0f) {
@@ -738,6 +761,12 @@ class SolverImpl {
         std::swap(s.p_h, out.dual_h);
         std::swap(s.p_v, out.dual_v);
         for (int l = 0; l < L; ++l) std::swap(s.q[l], out.dual_data[l]);
+        // Pixels whose warm normal the current inputs contradict (content
+        // that changed or moved unlike the warp assumed) count as unknown.
+        if (settings_.warm_refine_iterations > 0) {
+          report.inconsistent_pixels = internal::markInconsistentPixels(
+              level, s.n0, settings_.local_radius, unknown_, threads_);
+        }
         if (settings_.warm_refine_iterations > 0 &&
             std::find(unknown_.begin(), unknown_.end(), 1) != unknown_.end()) {
           active_.build(unknown_, W, H, settings_.warm_refine_radius);

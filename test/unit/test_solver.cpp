@@ -330,6 +330,63 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
   expectUnit(refined);
 }
 
+/// New content that the warp cannot know of (a patch whose normals turned
+/// by 40 degrees, with no unknown pixel in the warm start): the inputs
+/// contradict the warm start there, so the local refinement takes the patch
+/// and follows the new data; without it the patch stays stale.
+TEST(Solver, WarmStartFollowsContentTheWarpCannotKnow) {
+  NormalMap gt;
+  FusionProblem before = noisyTwoPlanes(64, 48, 0.3, &gt);
+  NormalInput second;
+  second.normals = test::noisy(gt, 0.2, 11);
+  before.inputs.push_back(second);
+  SolverSettings settings;
+  settings.relative_tolerance = 1e-7;
+  settings.max_total_inner_iterations = 6000;
+  settings.max_outer_iterations = 300;
+  SolverState converged;
+  Solver(settings).solve(before, converged, false);
+  // The patch x 8 - 23, y 16 - 31 (inside the left plane) turns to face
+  // 40 degrees up.
+  NormalMap gt_after = gt;
+  ScalarMap patch(64, 48, 1);
+  const float turned[3] = {0.0f, static_cast<float>(std::sin(0.698)),
+                           -static_cast<float>(std::cos(0.698))};
+  for (int y = 16; y < 32; ++y) {
+    for (int x = 8; x < 24; ++x) {
+      for (int c = 0; c < 3; ++c) gt_after.at(c, y, x) = turned[c];
+      patch.at(0, y, x) = 1.0f;
+    }
+  }
+  FusionProblem after = before;
+  after.inputs[0].normals = test::noisy(gt_after, 0.3, 21);
+  after.inputs[1].normals = test::noisy(gt_after, 0.2, 22);
+  auto warm_solve = [&](int refine, SolveReport* r) {
+    SolverSettings live;
+    live.max_total_inner_iterations = 1;
+    live.warm_refine_iterations = refine;
+    SolverState state = converged;
+    *r = Solver(live).solve(after, state, true);
+    return state.normals;
+  };
+  SolveReport with, without;
+  const NormalMap followed = warm_solve(100, &with);
+  const NormalMap stale = warm_solve(0, &without);
+  // Most of the patch is contradicted (measured: 197 of 256; the rest is
+  // refined as their neighbours or left to noise), little else.
+  EXPECT_GT(with.inconsistent_pixels, 150);
+  EXPECT_LT(with.inconsistent_pixels, 256 + 20);
+  EXPECT_EQ(without.inconsistent_pixels, 0);
+  const double angle_with = angularError(followed, gt_after, patch).mean_deg;
+  const double angle_without = angularError(stale, gt_after, patch).mean_deg;
+  SolveReport cold_report;
+  const NormalMap cold = Solver(settings).solve(after, &cold_report);
+  const double angle_cold = angularError(cold, gt_after, patch).mean_deg;
+  // Measured: 6.86 degrees live, 6.87 for a converged cold solve, 46.8 stale.
+  EXPECT_LT(angle_with, angle_cold + 1.0) << "cold " << angle_cold;
+  EXPECT_GT(angle_without, 30.0);
+}
+
 TEST(Solver, FastBackendMatchesReferenceOnAWholeSolve) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(40, 30, 0.4, &gt);

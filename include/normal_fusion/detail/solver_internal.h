@@ -27,6 +27,10 @@ struct PreparedLevel {
   /// `data_huber` (else every delta is 0: the plain unsquared penalty).
   std::vector<PlanarImage> data_eps;
   bool data_huber = false;
+  /// Per input, at the finest level when the local refinement of warm
+  /// starts is on: the normalized mean of f over the local window (planes
+  /// 0 - 2) and its spread s (plane 3; -1 below 2 samples).
+  std::vector<PlanarImage> data_mean;
   PlanarImage edge_weight;  ///< w_h (plane 0), w_v (plane 1)
   std::array<double, 9> K_inv{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
   CameraIntrinsics K;
@@ -167,6 +171,20 @@ struct ActiveBuffers {
 void runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
                         ActiveBuffers& buffers, int iterations);
 
+/// Angle between a warm start's normal and an input's window mean, beyond
+/// the window's spread, from which the input contradicts the warm start.
+constexpr double kInconsistentDegrees = 15.0;
+
+/// Marks unknown (unknown[i] = 1) the pixels whose warm-start normal every
+/// input observing them contradicts: |n - m_l| > chord(kInconsistentDegrees)
+/// + 2 s_l / (2 local_radius + 1) (two standard errors of the window's mean),
+/// m_l and s_l the input's window mean and spread (data_mean). Such pixels
+/// show content that changed or moved in a way the warp could not know of.
+/// Returns how many it marked (0 without data_mean).
+int markInconsistentPixels(const PreparedLevel& level,
+                           const PlanarImage& normals, int local_radius,
+                           std::vector<unsigned char>& unknown, int threads);
+
 /// The terms of E(n) that involve an active pixel: its data terms and the
 /// smoothness terms of the links that touch it (double accumulation). With
 /// the other pixels fixed, E changes exactly as this does.
@@ -282,9 +300,13 @@ void weakenHoleLinks(PreparedLevel& level, float factor, int threads);
 /// missing), writes the Huber thresholds delta (1 plane; only when the
 /// unsquared penalty has a threshold) and scales the weights c (1 plane) by
 /// the density correction.
+/// With `mean_spread` (4 planes), also writes each window's normalized mean
+/// of f (0 where the input has no sample in it) and its spread s (-1 below 2
+/// samples): what a warm start is checked against.
 void applyLocalStatistics(const SolverSettings& settings,
                           const PlanarImage& data, PlanarImage& data_eps,
-                          PlanarImage& data_weight, int threads);
+                          PlanarImage& data_weight, PlanarImage* mean_spread,
+                          int threads);
 
 /// E(n) of the fast backend: float terms summed per row, rows in double.
 double energyFast(const PreparedLevel& level, double huber_eps,
