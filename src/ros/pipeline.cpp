@@ -351,6 +351,9 @@ void FusionPipeline::process(const InputSet& set,
   stats->inner_iterations = report_.inner_iterations;
   stats->coarse_inner_iterations = report_.coarse_inner_iterations;
   stats->pyramid_levels = report_.pyramid_levels;
+  stats->inconsistent_pixels = report_.inconsistent_pixels;
+  stats->refined_pixels = report_.refined_pixels;
+  stats->refine_iterations = report_.refine_iterations;
   stats->initial_energy = report_.initial_energy;
   stats->final_energy = report_.final_energy;
   stats->solve_time = report_.seconds;
