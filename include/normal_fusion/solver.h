@@ -47,8 +47,9 @@ struct SolveReport {
   int coarse_inner_iterations =
       0;                        ///< iterations on the coarser pyramid levels
   int inconsistent_pixels = 0;  ///< warm-start pixels the inputs contradict
-  int refined_pixels = 0;       ///< pixels of the warm start's local refinement
-  int refine_iterations = 0;    ///< its inner iterations (on those pixels only)
+  int edge_pixels = 0;        ///< warm-start pixels at an edge of the warm map
+  int refined_pixels = 0;     ///< pixels of the warm start's local refinement
+  int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
   /// E at the finest level: start, then each accepted outer step. Empty
   /// (and initial_energy, final_energy NaN) when a warm start's local
   /// refinement used up the time budget, so that the whole-image step was

@@ -14,18 +14,23 @@
 namespace normal_fusion {
 namespace internal {
 
+void ActiveSet::preallocate(int W, int H) {
+  if (W == width && H == height) return;
+  const std::size_t N = static_cast<std::size_t>(W) * H;
+  width = W;
+  height = H;
+  mask.assign(N, 0);
+  scratch.assign(N, 0);
+  // Every entry written once (then cleared): the pages exist from now on.
+  for (auto* list : {&pixels, &links_h, &links_v}) {
+    list->assign(N, 0);
+    list->clear();
+  }
+}
+
 void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
                       int radius) {
-  const std::size_t N = static_cast<std::size_t>(W) * H;
-  if (W != width || H != height) {
-    width = W;
-    height = H;
-    mask.assign(N, 0);
-    scratch.assign(N, 0);
-    pixels.reserve(N);
-    links_h.reserve(N);
-    links_v.reserve(N);
-  }
+  preallocate(W, H);
   pixels.clear();
   links_h.clear();
   links_v.clear();
@@ -164,6 +169,28 @@ void growTo(std::vector<T>& v, std::size_t n) {
   if (v.size() < n) v.resize(n);
 }
 }  // namespace
+
+void ActiveBuffers::preallocate(int W, int H, int L, int active) {
+  const std::size_t N = static_cast<std::size_t>(W) * H;
+  const std::size_t P = static_cast<std::size_t>(active);
+  // About 2 links and 1.5 nodes per active pixel (ghosts included).
+  const std::size_t links = 2 * P + 1, nodes = 2 * P;
+  if (node_of.size() != N) node_of.assign(N, -1);
+  node_pixel.reserve(nodes);
+  for (auto* v : {&link_a, &link_b}) growTo(*v, links);
+  growTo(link_w, links);
+  for (auto& component : p) growTo(component, links);
+  for (int ch = 0; ch < 3; ++ch) {
+    growTo(nbar[ch], nodes);
+    growTo(node_n[ch], nodes);
+    for (auto* v : {&n[ch], &n0[ch], &ray[ch], &d[ch]}) growTo(*v, P);
+  }
+  growTo(q, 3 * L * P);
+  growTo(f, 3 * L * P);
+  growTo(c, L * P);
+  growTo(delta, L * P);
+  for (auto& list : pixel_links) growTo(list, P);
+}
 
 void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
                            const ActiveSet& active) {
@@ -520,6 +547,44 @@ int markInconsistentPixels(const PreparedLevel& level,
     if (observing > 0 && contradicting == observing) {
       unknown[i] = 1;
       ++marked;
+    }
+  }
+  return static_cast<int>(marked);
+}
+
+int markMapEdges(const PlanarImage& normals,
+                 std::vector<unsigned char>& unknown,
+                 std::vector<unsigned char>& edge, int threads) {
+  const int W = normals.width(), H = normals.height();
+  const float min_cos = static_cast<float>(
+      std::cos(kInconsistentDegrees * 3.14159265358979 / 180.0));
+  const float* nx = normals.plane(0);
+  const float* ny = normals.plane(1);
+  const float* nz = normals.plane(2);
+  edge.resize(unknown.size());
+  long marked = 0;
+#pragma omp parallel num_threads(threads)
+  {
+    // The edges into `edge` (reading `unknown` only), then merged.
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const int i = y * W + x;
+        auto apart = [&](int j) {
+          return unknown[j] != 1 &&
+                 nx[i] * nx[j] + ny[i] * ny[j] + nz[i] * nz[j] < min_cos;
+        };
+        edge[i] = unknown[i] == 0 &&
+                  ((x > 0 && apart(i - 1)) || (x + 1 < W && apart(i + 1)) ||
+                   (y > 0 && apart(i - W)) || (y + 1 < H && apart(i + W)));
+      }
+    }
+#pragma omp for schedule(static) reduction(+ : marked)
+    for (long i = 0; i < static_cast<long>(unknown.size()); ++i) {
+      if (edge[i] != 0) {
+        unknown[i] = 2;
+        ++marked;
+      }
     }
   }
   return static_cast<int>(marked);

@@ -723,6 +723,14 @@ class SolverImpl {
     report.filled_pixels = W * H - finest.valid_pixels;
 
     const bool use_warm = warm && out.compatible(W, H, L);
+    if (!use_warm && settings_.warm_refine_iterations > 0) {
+      // The local refinement's buffers, for the warm starts to come (sized
+      // for 1/16 of the pixels; they grow if a frame needs more).
+      active_.preallocate(W, H);
+      active_buffers_.preallocate(W, H, L, W * H / 16);
+      unknown_.resize(static_cast<std::size_t>(W) * H);
+      edge_scratch_map_.resize(static_cast<std::size_t>(W) * H);
+    }
     report.warm_started = use_warm;
     remaining_inner_ = settings_.max_total_inner_iterations;
 
@@ -766,13 +774,20 @@ class SolverImpl {
         if (settings_.warm_refine_iterations > 0) {
           report.inconsistent_pixels = internal::markInconsistentPixels(
               level, s.n0, settings_.local_radius, unknown_, threads_);
+          // The edges of the warm map: seeds of the refinement too (their
+          // warm normals kept as its start), since the camera's translation
+          // moves them.
+          report.edge_pixels = internal::markMapEdges(
+              s.n0, unknown_, edge_scratch_map_, threads_);
         }
         if (settings_.warm_refine_iterations > 0 &&
-            std::find(unknown_.begin(), unknown_.end(), 1) != unknown_.end()) {
+            std::any_of(unknown_.begin(), unknown_.end(),
+                        [](unsigned char u) { return u != 0; })) {
           active_.build(unknown_, W, H, settings_.warm_refine_radius);
-          // Unknown pixels: filled from their known neighbours; then the
-          // active pixels refined.
-          for (unsigned char& u : unknown_) u = u != 0 ? 0 : 1;  // now: known
+          // Unknown pixels (1) are filled from their known neighbours (the
+          // other seeds, 2, keep their warm normals); then the active pixels
+          // are refined. unknown_ now says: known.
+          for (unsigned char& u : unknown_) u = u == 1 ? 0 : 1;
           internal::fillUnknownPixels(
               level, settings_.huber_eps, settings_.penalty,
               settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
@@ -819,6 +834,7 @@ class SolverImpl {
  private:
   IterationState state_;
   PlanarImage candidate_;
+  std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges() scratch
   std::vector<unsigned char> unknown_;      ///< pixels the warm start lacked
   internal::ActiveSet active_;              ///< pixels of the local refinement
   internal::ActiveBuffers active_buffers_;  ///< their variables, gathered

@@ -101,6 +101,8 @@ struct ActiveSet {
   /// (seed[i] != 0, W * H entries) and lists the pixels and links.
   void build(const std::vector<unsigned char>& seed, int width, int height,
              int radius);
+  /// Sizes the buffers for a W x H image (written once).
+  void preallocate(int width, int height);
   bool empty() const { return pixels.empty(); }
 };
 
@@ -150,6 +152,10 @@ struct ActiveBuffers {
   /// (or n0) at the active pixels, n0 at the ghosts.
   std::array<std::vector<float>, 3> node_n;
 
+  /// Sizes every buffer for `active` active pixels of a W x H image with L
+  /// inputs (written once, so that the first warm start does not pay for
+  /// fresh memory).
+  void preallocate(int width, int height, int num_inputs, int active);
   /// Gathers the state at the active pixels (and their links and ghosts);
   /// n = nbar = n0 there.
   void gather(const PreparedLevel& level, const IterationState& state,
@@ -184,6 +190,15 @@ constexpr double kInconsistentDegrees = 15.0;
 int markInconsistentPixels(const PreparedLevel& level,
                            const PlanarImage& normals, int local_radius,
                            std::vector<unsigned char>& unknown, int threads);
+
+/// Marks (unknown[i] = 2) the pixels not yet marked whose warm-start normal is
+/// more than kInconsistentDegrees from a known 4-neighbour's: the edges of
+/// the previous map, which the camera's translation moves by a parallax that
+/// a rotation-only warp does not follow. `edge` is scratch (resized).
+/// Returns how many it marked.
+int markMapEdges(const PlanarImage& normals,
+                 std::vector<unsigned char>& unknown,
+                 std::vector<unsigned char>& edge, int threads);
 
 /// The terms of E(n) that involve an active pixel: its data terms and the
 /// smoothness terms of the links that touch it (double accumulation). With
