@@ -387,6 +387,69 @@ TEST(Solver, WarmStartFollowsContentTheWarpCannotKnow) {
   EXPECT_GT(angle_without, 30.0);
 }
 
+/// An edge that moved by 2 pixels (the parallax of a camera's translation,
+/// which a rotation-only warp does not follow), where no input observes it:
+/// the warm start has no unknown pixel and nothing contradicts it, but its
+/// map edge seeds the local refinement, which moves the edge to where the
+/// image puts it.
+TEST(Solver, WarmStartMovesAnEdgeOfTheMap) {
+  NormalMap gt;
+  FusionProblem before = noisyTwoPlanes(64, 48, 0.3, &gt);
+  NormalInput second;
+  second.normals = test::noisy(gt, 0.2, 11);
+  before.inputs.push_back(second);
+  SolverSettings settings;
+  settings.relative_tolerance = 1e-7;
+  settings.max_total_inner_iterations = 6000;
+  settings.max_outer_iterations = 300;
+  SolverState converged;
+  Solver(settings).solve(before, converged, false);
+  // Columns 30 and 31 now belong to the right plane, in the image too.
+  NormalMap gt_after = gt;
+  FusionProblem after = before;
+  ScalarMap strip(64, 48, 1);
+  for (int y = 0; y < 48; ++y) {
+    for (int x = 28; x < 36; ++x) strip.at(0, y, x) = 1.0f;
+    for (int x = 30; x < 32; ++x) {
+      for (int c = 0; c < 3; ++c) gt_after.at(c, y, x) = gt.at(c, y, 40);
+      after.image.at(0, y, x) = before.image.at(0, y, 40);
+    }
+  }
+  after.inputs[0].normals = test::noisy(gt_after, 0.3, 21);
+  after.inputs[1].normals = test::noisy(gt_after, 0.2, 22);
+  // No input sees columns 29 - 32, so no input can contradict the warm start
+  // there: the image's edge alone moves the map's edge.
+  for (NormalInput& input : after.inputs) {
+    for (int y = 0; y < 48; ++y) {
+      for (int x = 29; x < 33; ++x) input.normals.at(2, y, x) = kNaN;
+    }
+  }
+  auto warm_solve = [&](int refine, SolveReport* r) {
+    SolverSettings live;
+    live.max_total_inner_iterations = 1;
+    live.warm_refine_iterations = refine;
+    live.pyramid_levels = 1;
+    SolverState state = converged;
+    *r = Solver(live).solve(after, state, true);
+    return state.normals;
+  };
+  SolveReport with, without;
+  const NormalMap moved = warm_solve(100, &with);
+  const NormalMap stale = warm_solve(0, &without);
+  // Seeds: both sides of the old edge (columns 31, 32), nothing else.
+  EXPECT_EQ(with.inconsistent_pixels, 0);
+  EXPECT_EQ(with.edge_pixels, 2 * 48);
+  EXPECT_EQ(with.refined_pixels, 4 * 48);
+  EXPECT_EQ(without.edge_pixels, 0);
+  settings.pyramid_levels = 1;
+  const NormalMap cold = Solver(settings).solve(after);
+  const double angle_cold = angularError(cold, gt_after, strip).mean_deg;
+  const double angle_with = angularError(moved, gt_after, strip).mean_deg;
+  const double angle_without = angularError(stale, gt_after, strip).mean_deg;
+  EXPECT_LT(angle_with, angle_cold + 1.0) << "cold " << angle_cold;
+  EXPECT_GT(angle_without, angle_cold + 5.0) << "cold " << angle_cold;
+}
+
 TEST(Solver, FastBackendMatchesReferenceOnAWholeSolve) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(40, 30, 0.4, &gt);

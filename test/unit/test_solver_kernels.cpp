@@ -712,6 +712,30 @@ TEST(ActiveEnergy, ChangesAsTheWholeEnergy) {
   }
 }
 
+/// Map edges: the pixels on both sides of a crease, not those next to an
+/// unknown pixel only, and never an unknown one.
+TEST(MarkMapEdges, MarksBothSidesOfACrease) {
+  const int W = 12, H = 5;
+  PlanarImage n(W, H, 3);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const float s = x < 6 ? 0.6f : -0.6f;  // 74 degrees apart
+      n.at(0, y, x) = s;
+      n.at(2, y, x) = -0.8f;
+    }
+  }
+  std::vector<unsigned char> unknown(W * H, 0), scratch;
+  unknown[2 * W + 1] = 1;  // an unknown pixel away from the crease
+  const int marked = internal::markMapEdges(n, unknown, scratch, 2);
+  EXPECT_EQ(marked, 2 * H);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const int expected = (y == 2 && x == 1) ? 1 : (x == 5 || x == 6) ? 2 : 0;
+      EXPECT_EQ(unknown[y * W + x], expected) << x << "," << y;
+    }
+  }
+}
+
 /// Unknown pixels between two planes take the side their data supports.
 TEST(FillUnknownPixels, TakesTheNeighbourThatFitsTheData) {
   const int W = 20, H = 8;
