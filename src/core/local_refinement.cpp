@@ -22,7 +22,7 @@ void ActiveSet::preallocate(int W, int H) {
   mask.assign(N, 0);
   scratch.assign(N, 0);
   // Every entry written once (then cleared): the pages exist from now on.
-  for (auto* list : {&pixels, &links_h, &links_v}) {
+  for (auto* list : {&pixels, &links_h, &links_v, &links_up, &links_down}) {
     list->assign(N, 0);
     list->clear();
   }
@@ -34,6 +34,7 @@ void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
   pixels.clear();
   links_h.clear();
   links_v.clear();
+  links_down.clear();
   // Dilation by a (2 radius + 1)^2 square, separably: along the rows into
   // `scratch`, then down the columns into `mask`.
   for (int y = 0; y < H; ++y) {
@@ -61,6 +62,9 @@ void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
   }
   // The active pixels, and each link once: to the right and below an active
   // pixel, and to the left and above one when that neighbour is inactive.
+  // Horizontal links come in ascending order; vertical ones in two ascending
+  // lists (above, below), merged.
+  links_up.clear();
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const int i = y * W + x;
@@ -68,12 +72,13 @@ void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
       pixels.push_back(i);
       if (x > 0 && mask[i - 1] == 0) links_h.push_back(i - 1);
       if (x + 1 < W) links_h.push_back(i);
-      if (y > 0 && mask[i - W] == 0) links_v.push_back(i - W);
-      if (y + 1 < H) links_v.push_back(i);
+      if (y > 0 && mask[i - W] == 0) links_up.push_back(i - W);
+      if (y + 1 < H) links_down.push_back(i);
     }
   }
-  std::sort(links_h.begin(), links_h.end());
-  std::sort(links_v.begin(), links_v.end());
+  links_v.resize(links_up.size() + links_down.size());
+  std::merge(links_up.begin(), links_up.end(), links_down.begin(),
+             links_down.end(), links_v.begin());
 }
 
 namespace {
@@ -484,31 +489,38 @@ void chooseCandidate(const PreparedLevel& level, double huber_eps,
 void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
-                       const ActiveSet& active, int max_passes) {
+                       const ActiveSet& active, int max_passes,
+                       std::vector<unsigned char>& filled, int threads) {
   const int W = level.width, H = level.height;
+  const long count = static_cast<long>(active.pixels.size());
+  filled.assign(known.size(), 0);
   // Pass by pass inwards from the known pixels: an unknown pixel with a known
-  // 4-neighbour (known before this pass) takes its best candidate.
+  // 4-neighbour (known before this pass) takes its best candidate. Within a
+  // pass, pixels read only known ones and write only themselves (in
+  // parallel); they become known after it.
   for (int pass = 0; pass < max_passes; ++pass) {
-    bool any_left = false, any_filled = false;
-    for (int i : active.pixels) {
+    long left = 0, filled_now = 0;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(+ : left, filled_now)
+    for (long k = 0; k < count; ++k) {
+      const int i = active.pixels[k];
       if (known[i] != 0) continue;
       const int x = i % W, y = i / W;
       const bool next_to_known =
           (x > 0 && known[i - 1] == 1) || (x + 1 < W && known[i + 1] == 1) ||
           (y > 0 && known[i - W] == 1) || (y + 1 < H && known[i + W] == 1);
       if (!next_to_known) {
-        any_left = true;
+        ++left;
         continue;
       }
       chooseCandidate(level, huber_eps, penalty, soft, normals, known.data(),
                       i);
-      known[i] = 2;  // filled in this pass: a neighbour from the next one on
-      any_filled = true;
+      filled[i] = 1;
+      ++filled_now;
     }
     for (int i : active.pixels) {
-      if (known[i] == 2) known[i] = 1;
+      if (filled[i] != 0) known[i] = 1;
     }
-    if (!any_left || !any_filled) break;
+    if (left == 0 || filled_now == 0) break;
   }
 }
 

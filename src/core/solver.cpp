@@ -791,7 +791,7 @@ class SolverImpl {
           internal::fillUnknownPixels(
               level, settings_.huber_eps, settings_.penalty,
               settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
-              active_, kFillPasses);
+              active_, kFillPasses, edge_scratch_map_, threads_);
           refineActive(level, s, report);
         }
       } else {
@@ -834,7 +834,7 @@ class SolverImpl {
  private:
   IterationState state_;
   PlanarImage candidate_;
-  std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges() scratch
+  std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges(), fill
   std::vector<unsigned char> unknown_;      ///< pixels the warm start lacked
   internal::ActiveSet active_;              ///< pixels of the local refinement
   internal::ActiveBuffers active_buffers_;  ///< their variables, gathered

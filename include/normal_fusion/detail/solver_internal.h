@@ -96,6 +96,7 @@ struct ActiveSet {
   std::vector<int> links_v;  ///< upper pixel of each vertical link with an
                              ///< active end
   std::vector<unsigned char> scratch;
+  std::vector<int> links_up, links_down;  ///< scratch of build()
 
   /// Marks active every pixel within `radius` (Chebyshev distance) of a seed
   /// (seed[i] != 0, W * H entries) and lists the pixels and links.
@@ -120,10 +121,12 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
 /// its own observations, the one of the lowest energy terms with those
 /// neighbours; it is then known. Pixels still unknown after `max_passes` keep
 /// their normal.
+/// `filled` is scratch (resized); `threads` share each pass.
 void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
-                       const ActiveSet& active, int max_passes);
+                       const ActiveSet& active, int max_passes,
+                       std::vector<unsigned char>& filled, int threads);
 
 /// The variables of a local refinement gathered into contiguous arrays, one
 /// array per component (the fast path of runInnerActive()). Nodes are the
