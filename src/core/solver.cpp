@@ -1078,10 +1078,10 @@ class SolverImpl {
       const double e = energy_of(candidate_);
       finish_seconds = seconds_since(finish_start);
       if (finest) {
-        // The least a finest level costs: its first energy, one iteration
-        // and one closing step.
+        // The least a finest level costs: its first energy, a first chunk
+        // of 2 iterations and one closing step.
         level_seconds_ =
-            energy_seconds + seconds_per_iteration + finish_seconds;
+            energy_seconds + 2.0 * seconds_per_iteration + finish_seconds;
       }
       bool converged = false;
       if (e <= best) {
