@@ -98,12 +98,14 @@ struct SolverSettings {
 
   /// Local refinement of a warm start. The pixels that the warm start does
   /// not predict (NaN or zero normals: uncovered by a warp, or at an edge of
-  /// the previous map) are filled from their known neighbours, and they and
-  /// the pixels within warm_refine_radius of them are solved first, every
-  /// other pixel held fixed, for warm_refine_iterations inner iterations
-  /// (outer steps of 5; not counted in max_total_inner_iterations, but
-  /// stopped by the time budget); the whole image follows. Costs in
-  /// proportion to those pixels, not the image. 0 = off.
+  /// the previous map) are filled from their known neighbours and the
+  /// inputs; they, the pixels whose warm normal every observing input
+  /// contradicts, the edges of the warm map (which a camera's translation
+  /// moves) and the pixels within warm_refine_radius of these are solved
+  /// first, every other pixel held fixed, for warm_refine_iterations inner
+  /// iterations (outer steps of 5; not counted in max_total_inner_iterations,
+  /// but stopped by the time budget); the whole image follows if time is
+  /// left. Costs in proportion to those pixels, not the image. 0 = off.
   int warm_refine_iterations = 100;
   int warm_refine_radius = 1;
 
