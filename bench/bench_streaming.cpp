@@ -48,6 +48,9 @@ int main(int argc, char** argv) {
   // --refine N: the warm start's local refinement iterations (default: the
   // solver's; 0 = off).
   int refine = -1;
+  // --still 1: the camera does not move (frame 0 over and over, new noise
+  // each frame): what is left is the noise of each frame, not the motion.
+  bool still = false;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -65,6 +68,8 @@ int main(int argc, char** argv) {
       budget_ms = value;
     else if (key == "--degrees-per-frame")
       degrees_per_frame = value;
+    else if (key == "--still")
+      still = value != 0.0;
     else if (key == "--warm")
       warm_start = value != 0.0;
     else if (key == "--iterations")
@@ -76,8 +81,9 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  const auto sequence = nf::synthetic::renderSequence(
-      scene, width, height, frames + 1, degrees_per_frame);
+  auto sequence = nf::synthetic::renderSequence(
+      scene, width, height, still ? 1 : frames + 1, degrees_per_frame);
+  if (still) sequence.resize(frames + 1, sequence[0]);
   nf::SolverSettings live;
   live.num_threads = threads;
   live.time_budget_ms = iterations > 0 ? 0.0 : budget_ms;
@@ -93,9 +99,10 @@ int main(int argc, char** argv) {
   std::printf(
       "# streaming: scene %d, %dx%d, 2 inputs, %.2f deg/frame, budget %.1f ms, "
       "%d inner iterations per frame (0: by the budget), local refinement of "
-      "the warm start %d iterations at most, %d threads\n",
-      scene, width, height, degrees_per_frame, live.time_budget_ms, iterations,
-      live.warm_refine_iterations, threads);
+      "the warm start %d iterations at most, %d threads%s\n",
+      scene, width, height, still ? 0.0 : degrees_per_frame,
+      live.time_budget_ms, iterations, live.warm_refine_iterations, threads,
+      still ? ", camera still" : "");
   std::printf(
       "| frame | solve ms | inner its | refined px | refine its | warm | PSNR "
       "live (dB) | PSNR converged (dB) | deficit (dB) | PSNR warm start (dB) | "
