@@ -1,7 +1,9 @@
-// Local refinement of a warm start: the Chambolle-Pock iteration restricted
-// to a set of active pixels (those the warm start could not predict and their
-// surroundings), every other pixel held fixed. The steps are the reference
-// backend's per-pixel steps, visited through index lists; the work is in
+// Local refinement of a warm start: which pixels to refine (unknown,
+// contradicted by the inputs, edges of the warm map, and their surroundings),
+// how the unknown ones are filled, and the Chambolle-Pock iteration restricted
+// to them with every other pixel held fixed: the reference path (the
+// reference backend's per-pixel steps through index lists) and the gathered
+// arrays of the fast path (its kernel is in kernels_fast.cpp). The work is in
 // proportion to the active pixels, not the image.
 #include <omp.h>
 

@@ -42,6 +42,9 @@ constexpr double kCoarseTolerance = 1e-3;
 /// pixels start far from their solution (filled in) and gain from frequent
 /// re-linearization.
 constexpr int kRefineStepIterations = 5;
+/// Safety factor on the predicted cost of the next step near the time
+/// budget's end (the machine's speed varies from step to step).
+constexpr double kBudgetMargin = 1.5;
 /// Passes of the fill of a warm start's unknown pixels (each reaches one
 /// pixel further from the known ones).
 constexpr int kFillPasses = 16;
@@ -890,13 +893,14 @@ class SolverImpl {
     return params;
   }
 
-  /// False when a time budget is set and what is left of it is less than the
-  /// least the finest level took last time (unknown before one ran: true).
+  /// False when a time budget is set and what is left of it is less than
+  /// kBudgetMargin times the least the finest level took last time (unknown
+  /// before one ran: true).
   bool levelFits() const {
     if (!has_deadline_) return true;
     const double left =
         std::chrono::duration<double>(deadline_ - Clock::now()).count();
-    return left >= level_seconds_;
+    return left >= kBudgetMargin * level_seconds_;
   }
 
   /// Local refinement of a warm start (SolverSettings::warm_refine_*):
@@ -930,7 +934,8 @@ class SolverImpl {
       const Clock::time_point step_start = Clock::now();
       if (has_deadline_ &&
           step_start + std::chrono::duration_cast<Clock::duration>(
-                           std::chrono::duration<double>(step_seconds)) >
+                           std::chrono::duration<double>(kBudgetMargin *
+                                                         step_seconds)) >
               deadline_) {
         report.budget_exhausted = true;
         break;
