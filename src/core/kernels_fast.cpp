@@ -213,8 +213,6 @@ void subtractRow(int W, const float* __restrict q, float* __restrict d) {
   for (int x = 0; x < W; ++x) d[x] -= q[x];
 }
 
-/// n <- Proj_C(n + tau d), nbar <- 2 n - n_old for one row; C the tangent
-/// plane at n0, intersected with n . r <= 0 when kSoft.
 /// v <- Proj_C(v): onto the tangent plane n0 . n = 1 (n0 = a), then, when
 /// kSoft, within the plane onto n . r <= 0 (the line n . r = 0 when
 /// violated). Branch-free, for vectorised loops.
