@@ -819,10 +819,17 @@ class SolverImpl {
 
     // Output: the accepted (unit) normals and the duals for the next frame,
     // swapped out (the state's old buffers become the next solve's scratch).
+    // The state's buffers are sized first, so that the iteration state keeps
+    // sized buffers: a first solve into an empty state allocates here, not
+    // the next (warm) frame.
+    out.normals.resize(W, H, 3);
+    out.dual_h.resize(W, H, 3);
+    out.dual_v.resize(W, H, 3);
+    out.dual_data.resize(L);
+    for (PlanarImage& q : out.dual_data) q.resize(W, H, 3);
     std::swap(out.normals, s.n0);
     std::swap(out.dual_h, s.p_h);
     std::swap(out.dual_v, s.p_v);
-    out.dual_data.resize(L);
     for (int l = 0; l < L; ++l) std::swap(out.dual_data[l], s.q[l]);
     if (report.energies.empty()) {
       report.initial_energy = report.final_energy =
