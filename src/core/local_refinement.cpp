@@ -332,10 +332,6 @@ double energyActive(const PreparedLevel& level, double huber_eps,
                     DataPenalty penalty, const PlanarImage& normals,
                     const ActiveSet& active, int num_threads) {
   const int W = level.width;
-  const double eps = huber_eps;
-  auto huber = [eps](double z) {
-    return z < eps ? z * z / (2.0 * eps) : z - 0.5 * eps;
-  };
   // w huber(|n_j - n_i|) of one link.
   auto link = [&](const float* w, int i, int j) {
     double g2 = 0.0;
@@ -344,7 +340,7 @@ double energyActive(const PreparedLevel& level, double huber_eps,
           static_cast<double>(normals.plane(c)[j]) - normals.plane(c)[i];
       g2 += g * g;
     }
-    return w[i] * huber(std::sqrt(g2));
+    return w[i] * huberPenalty(std::sqrt(g2), huber_eps);
   };
   const long num_h = static_cast<long>(active.links_h.size());
   const long num_v = static_cast<long>(active.links_v.size());
@@ -367,24 +363,9 @@ double energyActive(const PreparedLevel& level, double huber_eps,
 #pragma omp for schedule(static) nowait
     for (long k = 0; k < num_px; ++k) {
       const int i = active.pixels[k];
-      for (int l = 0; l < level.num_inputs; ++l) {
-        const double c_w = level.data_weight[l].plane(0)[i];
-        if (c_w <= 0.0) continue;
-        double d2 = 0.0;
-        for (int c = 0; c < 3; ++c) {
-          const double d = static_cast<double>(normals.plane(c)[i]) -
-                           level.data[l].plane(c)[i];
-          d2 += d * d;
-        }
-        if (penalty == DataPenalty::kSquaredL2) {
-          total += c_w * 0.5 * d2;
-          continue;
-        }
-        const double z = std::sqrt(d2);
-        const double delta =
-            level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0;
-        total += c_w * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
-      }
+      const double n[3] = {normals.plane(0)[i], normals.plane(1)[i],
+                           normals.plane(2)[i]};
+      total += dataEnergyAt(level, penalty, i, n);
     }
   }
   return total;
@@ -400,23 +381,8 @@ double pixelEnergy(const PreparedLevel& level, double huber_eps,
                    const unsigned char* use, int i, const float v[3]) {
   const int W = level.width, H = level.height;
   const int x = i % W, y = i / W;
-  double total = 0.0;
-  for (int l = 0; l < level.num_inputs; ++l) {
-    const double c_w = level.data_weight[l].plane(0)[i];
-    if (c_w <= 0.0) continue;
-    double d2 = 0.0;
-    for (int c = 0; c < 3; ++c) {
-      const double d = static_cast<double>(v[c]) - level.data[l].plane(c)[i];
-      d2 += d * d;
-    }
-    if (penalty == DataPenalty::kSquaredL2) {
-      total += c_w * 0.5 * d2;
-      continue;
-    }
-    const double z = std::sqrt(d2);
-    const double delta = level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0;
-    total += c_w * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
-  }
+  const double n[3] = {v[0], v[1], v[2]};
+  double total = dataEnergyAt(level, penalty, i, n);
   // w huber(|v - n_j|) of the link between i and j, weight w_h or w_v at the
   // link's left or upper pixel.
   auto link = [&](int j, float w) {
@@ -426,9 +392,7 @@ double pixelEnergy(const PreparedLevel& level, double huber_eps,
       const double g = static_cast<double>(normals.plane(c)[j]) - v[c];
       g2 += g * g;
     }
-    const double z = std::sqrt(g2);
-    total +=
-        w * (z < huber_eps ? z * z / (2.0 * huber_eps) : z - 0.5 * huber_eps);
+    total += w * huberPenalty(std::sqrt(g2), huber_eps);
   };
   const float* w_h = level.edge_weight.plane(0);
   const float* w_v = level.edge_weight.plane(1);

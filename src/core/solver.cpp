@@ -555,10 +555,6 @@ namespace internal {
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
               const PlanarImage& normals, int num_threads) {
   const int W = level.width, H = level.height;
-  const double eps = huber_eps;
-  auto huber = [eps](double z) {
-    return z < eps ? z * z / (2.0 * eps) : z - 0.5 * eps;
-  };
   double total = 0.0;
 #pragma omp parallel for num_threads(num_threads) reduction(+ : total) schedule(static)
   for (int y = 0; y < H; ++y) {
@@ -567,24 +563,8 @@ double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
       const double n[3] = {normals.at(0, y, x), normals.at(1, y, x),
                            normals.at(2, y, x)};
       // Data terms: sum_l c_l phi(n - f_l).
-      for (int l = 0; l < level.num_inputs; ++l) {
-        const double c = level.data_weight[l].at(0, y, x);
-        if (c <= 0.0) continue;
-        double d2 = 0.0;
-        for (int ch = 0; ch < 3; ++ch) {
-          const double d = n[ch] - level.data[l].at(ch, y, x);
-          d2 += d * d;
-        }
-        if (penalty == DataPenalty::kSquaredL2) {
-          row_sum += c * 0.5 * d2;
-          continue;
-        }
-        // c huber_delta(|n - f|); delta = 0: c |n - f|.
-        const double z = std::sqrt(d2);
-        const double delta =
-            level.data_huber ? level.data_eps[l].at(0, y, x) : 0.0;
-        row_sum += c * (z < delta ? z * z / (2.0 * delta) : z - 0.5 * delta);
-      }
+      row_sum +=
+          dataEnergyAt(level, penalty, static_cast<std::size_t>(y) * W + x, n);
       // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n).
       if (x + 1 < W) {
         double g2 = 0.0;
@@ -592,7 +572,8 @@ double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
           const double g = normals.at(ch, y, x + 1) - n[ch];
           g2 += g * g;
         }
-        row_sum += level.edge_weight.at(0, y, x) * huber(std::sqrt(g2));
+        row_sum += level.edge_weight.at(0, y, x) *
+                   huberPenalty(std::sqrt(g2), huber_eps);
       }
       if (y + 1 < H) {
         double g2 = 0.0;
@@ -600,7 +581,8 @@ double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
           const double g = normals.at(ch, y + 1, x) - n[ch];
           g2 += g * g;
         }
-        row_sum += level.edge_weight.at(1, y, x) * huber(std::sqrt(g2));
+        row_sum += level.edge_weight.at(1, y, x) *
+                   huberPenalty(std::sqrt(g2), huber_eps);
       }
     }
     total += row_sum;

@@ -218,6 +218,35 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
 void runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations);
 
+/// huber_eps(z) = z^2 / (2 eps) below eps, z - eps / 2 above (eps = 0: z).
+inline double huberPenalty(double z, double eps) {
+  return z < eps ? z * z / (2.0 * eps) : z - 0.5 * eps;
+}
+
+/// The data terms of E at pixel i for the normal n: sum_l c_l phi(n - f_l),
+/// phi = huber_delta_l(|.|) for the unsquared penalty (delta_l = 0: |.|),
+/// |.|^2 / 2 for the squared one.
+inline double dataEnergyAt(const PreparedLevel& level, DataPenalty penalty,
+                           std::size_t i, const double n[3]) {
+  double total = 0.0;
+  for (int l = 0; l < level.num_inputs; ++l) {
+    const double c = level.data_weight[l].plane(0)[i];
+    if (c <= 0.0) continue;
+    double d2 = 0.0;
+    for (int ch = 0; ch < 3; ++ch) {
+      const double d = n[ch] - level.data[l].plane(ch)[i];
+      d2 += d * d;
+    }
+    if (penalty == DataPenalty::kSquaredL2) {
+      total += c * 0.5 * d2;
+      continue;
+    }
+    const double delta = level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0;
+    total += c * huberPenalty(std::sqrt(d2), delta);
+  }
+  return total;
+}
+
 /// Projection onto C = {n : n0 . n = 1} (and n . r <= 0 when `soft`).
 /// Closed form: project on the plane; if the half-space is violated, project
 /// within the plane onto the line where n . r = 0.
