@@ -29,6 +29,18 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace normal_fusion {
 namespace {
 
+/// The cylinder scene, 96x64, with two noisy inputs.
+FusionProblem cylinderTwoInputs() {
+  NormalMap gt;
+  FusionProblem problem = test::cylinderScene(96, 64, &gt);
+  for (std::uint64_t l = 0; l < 2; ++l) {
+    NormalInput input;
+    input.normals = test::noisy(gt, 0.3, 5 + l);
+    problem.inputs.push_back(input);
+  }
+  return problem;
+}
+
 long allocationsDuring(const std::function<void()>& work) {
   g_allocations.store(0);
   g_counting.store(true);
@@ -41,13 +53,7 @@ TEST(Allocations, NonePerFrameOnceRunning) {
   for (SolverBackend backend :
        {SolverBackend::kFast, SolverBackend::kReference}) {
     for (bool with_holes : {false, true}) {
-      NormalMap gt;
-      FusionProblem problem = test::cylinderScene(96, 64, &gt);
-      for (std::uint64_t l = 0; l < 2; ++l) {
-        NormalInput input;
-        input.normals = test::noisy(gt, 0.3, 5 + l);
-        problem.inputs.push_back(input);
-      }
+      FusionProblem problem = cylinderTwoInputs();
       if (with_holes) {  // cold starts then use the pyramid
         for (int y = 10; y < 40; ++y) {
           for (int x = 10; x < 40; ++x) {
@@ -86,13 +92,7 @@ TEST(Allocations, NonePerFrameOnceRunning) {
 TEST(Allocations, NonePerWarpedFrameWithLocalRefinement) {
   for (SolverBackend backend :
        {SolverBackend::kFast, SolverBackend::kReference}) {
-    NormalMap gt;
-    FusionProblem problem = test::cylinderScene(96, 64, &gt);
-    for (std::uint64_t l = 0; l < 2; ++l) {
-      NormalInput input;
-      input.normals = test::noisy(gt, 0.3, 5 + l);
-      problem.inputs.push_back(input);
-    }
+    FusionProblem problem = cylinderTwoInputs();
     SolverSettings settings;
     settings.backend = backend;
     settings.max_total_inner_iterations = 20;

@@ -24,6 +24,40 @@ FusionProblem noisyTwoPlanes(int W, int H, double sigma, NormalMap* gt,
   return problem;
 }
 
+/// The two-plane scene with two noisy inputs (sigma_0 with seed 7, sigma_1
+/// with seed 11).
+FusionProblem twoPlanesTwoInputs(double sigma_0, double sigma_1,
+                                 NormalMap* gt) {
+  FusionProblem problem = noisyTwoPlanes(64, 48, sigma_0, gt);
+  NormalInput second;
+  second.normals = test::noisy(*gt, sigma_1, 11);
+  problem.inputs.push_back(second);
+  return problem;
+}
+
+/// Settings that run a solve to convergence.
+SolverSettings convergedSettings() {
+  SolverSettings settings;
+  settings.relative_tolerance = 1e-7;
+  settings.max_total_inner_iterations = 6000;
+  settings.max_outer_iterations = 300;
+  return settings;
+}
+
+/// A warm solve from `start`: the local refinement (`refine` iterations),
+/// then 1 whole-image iteration. Returns the normals.
+NormalMap refineOnce(const FusionProblem& problem, const SolverState& start,
+                     int refine, SolveReport* report,
+                     SolverBackend backend = SolverBackend::kFast) {
+  SolverSettings live;
+  live.max_total_inner_iterations = 1;
+  live.warm_refine_iterations = refine;
+  live.backend = backend;
+  SolverState state = start;
+  *report = Solver(live).solve(problem, state, true);
+  return state.normals;
+}
+
 float dot3(const NormalMap& n, std::size_t i, const float r[3]) {
   return n.plane(0)[i] * r[0] + n.plane(1)[i] * r[1] + n.plane(2)[i] * r[2];
 }
@@ -274,16 +308,9 @@ TEST(Solver, WarmStartFromConvergedStateNeedsFarFewerIterations) {
 /// ends far closer to the converged solution than the same solve without it.
 TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
   NormalMap gt;
-  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
-  NormalInput second;
-  second.normals = test::noisy(gt, 0.3, 11);
-  problem.inputs.push_back(second);
-  SolverSettings settings;
-  settings.relative_tolerance = 1e-7;
-  settings.max_total_inner_iterations = 6000;
-  settings.max_outer_iterations = 300;
+  const FusionProblem problem = twoPlanesTwoInputs(0.5, 0.3, &gt);
   SolverState converged;
-  Solver(settings).solve(problem, converged, false);
+  Solver(convergedSettings()).solve(problem, converged, false);
   // Unknown: columns 28 - 35 (across the planes' edge at x = 32) and the
   // first 3 columns.
   SolverState holed = converged;
@@ -296,20 +323,11 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
       }
     }
   }
-  auto warm_solve = [&](int refine, SolverBackend backend, SolveReport* r) {
-    SolverSettings live;
-    live.max_total_inner_iterations = 1;
-    live.warm_refine_iterations = refine;
-    live.backend = backend;
-    SolverState state = holed;
-    *r = Solver(live).solve(problem, state, true);
-    return state.normals;
-  };
   SolveReport with, without, reference;
-  const NormalMap refined = warm_solve(100, SolverBackend::kFast, &with);
-  const NormalMap plain = warm_solve(0, SolverBackend::kFast, &without);
+  const NormalMap refined = refineOnce(problem, holed, 100, &with);
+  const NormalMap plain = refineOnce(problem, holed, 0, &without);
   const NormalMap oracle =
-      warm_solve(100, SolverBackend::kReference, &reference);
+      refineOnce(problem, holed, 100, &reference, SolverBackend::kReference);
   EXPECT_TRUE(with.warm_started);
   // Columns 27 - 36 and 0 - 3 (the band, the strip and 1 pixel around
   // each), 48 rows.
@@ -336,14 +354,8 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
 /// and follows the new data; without it the patch stays stale.
 TEST(Solver, WarmStartFollowsContentTheWarpCannotKnow) {
   NormalMap gt;
-  FusionProblem before = noisyTwoPlanes(64, 48, 0.3, &gt);
-  NormalInput second;
-  second.normals = test::noisy(gt, 0.2, 11);
-  before.inputs.push_back(second);
-  SolverSettings settings;
-  settings.relative_tolerance = 1e-7;
-  settings.max_total_inner_iterations = 6000;
-  settings.max_outer_iterations = 300;
+  const FusionProblem before = twoPlanesTwoInputs(0.3, 0.2, &gt);
+  SolverSettings settings = convergedSettings();
   SolverState converged;
   Solver(settings).solve(before, converged, false);
   // The patch x 8 - 23, y 16 - 31 (inside the left plane) turns to face
@@ -361,17 +373,9 @@ TEST(Solver, WarmStartFollowsContentTheWarpCannotKnow) {
   FusionProblem after = before;
   after.inputs[0].normals = test::noisy(gt_after, 0.3, 21);
   after.inputs[1].normals = test::noisy(gt_after, 0.2, 22);
-  auto warm_solve = [&](int refine, SolveReport* r) {
-    SolverSettings live;
-    live.max_total_inner_iterations = 1;
-    live.warm_refine_iterations = refine;
-    SolverState state = converged;
-    *r = Solver(live).solve(after, state, true);
-    return state.normals;
-  };
   SolveReport with, without;
-  const NormalMap followed = warm_solve(100, &with);
-  const NormalMap stale = warm_solve(0, &without);
+  const NormalMap followed = refineOnce(after, converged, 100, &with);
+  const NormalMap stale = refineOnce(after, converged, 0, &without);
   // Most of the patch is contradicted (measured: 197 of 256; the rest is
   // refined as their neighbours or left to noise), little else.
   EXPECT_GT(with.inconsistent_pixels, 150);
@@ -394,14 +398,8 @@ TEST(Solver, WarmStartFollowsContentTheWarpCannotKnow) {
 /// image puts it.
 TEST(Solver, WarmStartMovesAnEdgeOfTheMap) {
   NormalMap gt;
-  FusionProblem before = noisyTwoPlanes(64, 48, 0.3, &gt);
-  NormalInput second;
-  second.normals = test::noisy(gt, 0.2, 11);
-  before.inputs.push_back(second);
-  SolverSettings settings;
-  settings.relative_tolerance = 1e-7;
-  settings.max_total_inner_iterations = 6000;
-  settings.max_outer_iterations = 300;
+  const FusionProblem before = twoPlanesTwoInputs(0.3, 0.2, &gt);
+  SolverSettings settings = convergedSettings();
   SolverState converged;
   Solver(settings).solve(before, converged, false);
   // Columns 30 and 31 now belong to the right plane, in the image too.
@@ -424,18 +422,9 @@ TEST(Solver, WarmStartMovesAnEdgeOfTheMap) {
       for (int x = 29; x < 33; ++x) input.normals.at(2, y, x) = kNaN;
     }
   }
-  auto warm_solve = [&](int refine, SolveReport* r) {
-    SolverSettings live;
-    live.max_total_inner_iterations = 1;
-    live.warm_refine_iterations = refine;
-    live.pyramid_levels = 1;
-    SolverState state = converged;
-    *r = Solver(live).solve(after, state, true);
-    return state.normals;
-  };
   SolveReport with, without;
-  const NormalMap moved = warm_solve(100, &with);
-  const NormalMap stale = warm_solve(0, &without);
+  const NormalMap moved = refineOnce(after, converged, 100, &with);
+  const NormalMap stale = refineOnce(after, converged, 0, &without);
   // Seeds: both sides of the old edge (columns 31, 32), nothing else.
   EXPECT_EQ(with.inconsistent_pixels, 0);
   EXPECT_EQ(with.edge_pixels, 2 * 48);
