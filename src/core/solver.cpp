@@ -831,7 +831,8 @@ class SolverImpl {
   internal::ActiveSet active_;              ///< pixels of the local refinement
   internal::ActiveBuffers active_buffers_;  ///< their variables, gathered
   double level_seconds_ = 0.0;  ///< least cost of the finest level, measured
-  std::vector<float> n_saved_;  ///< the refinement's iterate while normalized
+  std::vector<float>
+      n_saved_;  ///< reference refinement: iterate while normalized
   std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
@@ -912,11 +913,13 @@ class SolverImpl {
       s.nbar = s.n0;
       best = internal::energyActive(level, settings_.huber_eps,
                                     settings_.penalty, s.n0, active_, threads_);
+      if (n_saved_.size() < 3 * pixels.size()) {
+        n_saved_.resize(3 * pixels.size());
+      }
     } else {
       b.gather(level, s, active_);
       best = b.energy(settings_.huber_eps, settings_.penalty);
     }
-    if (n_saved_.size() < 3 * pixels.size()) n_saved_.resize(3 * pixels.size());
     int remaining = settings_.warm_refine_iterations;
     double step_seconds = 0.0;  // what the last outer step took
     while (remaining > 0) {
