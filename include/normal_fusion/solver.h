@@ -60,6 +60,13 @@ struct SolveReport {
   double initial_energy = 0.0;
   double final_energy = 0.0;
   double seconds = 0.0;
+  /// Where `seconds` went: preparing the inputs (all pyramid levels), making
+  /// the warm start usable (sanitizing, finding the pixels to refine, filling
+  /// the unknown ones) and the local refinement's iterations. The rest is the
+  /// whole-image levels and the output.
+  double prepare_seconds = 0.0;
+  double warm_start_seconds = 0.0;
+  double refine_seconds = 0.0;
   bool warm_started = false;
   bool converged = false;         ///< stopped on the relative tolerance
   bool budget_exhausted = false;  ///< stopped on the wall-clock budget

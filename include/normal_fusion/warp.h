@@ -26,4 +26,31 @@ constexpr double kMaxBlendDegrees = 15.0;
 void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                          const std::array<double, 9>& R_cur_prev);
 
+/// What a warp does with the state's duals.
+enum class DualWarp {
+  kRotate,  ///< moved and rotated like the normals (zero where not predicted)
+  kReset,   ///< set to zero: the cheaper choice when the solver's local
+            ///< refinement (warm_refine_iterations > 0) re-solves the pixels
+            ///< where the warm start is uncertain (bench_streaming measures
+            ///< the same live PSNR either way)
+};
+
+/// The same for a live stream: the warped state is written into `scratch`'s
+/// buffers and swapped in (the old buffers become the next call's scratch, so
+/// that a stream of frames of one size allocates nothing once running), with
+/// `num_threads` threads (0 = all hardware threads).
+void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
+                         const std::array<double, 9>& R_cur_prev,
+                         SolverState& scratch, int num_threads,
+                         DualWarp dual_warp = DualWarp::kRotate);
+
+namespace internal {
+
+/// Per-pixel reference of warpStateByRotation (one thread, a new state each
+/// call): the test oracle of the fast version.
+void warpStateByRotationReference(SolverState& state, const CameraIntrinsics& K,
+                                  const std::array<double, 9>& R_cur_prev);
+
+}  // namespace internal
+
 }  // namespace normal_fusion

@@ -660,6 +660,15 @@ void SolverState::clear() {
   dual_data.clear();
 }
 
+namespace {
+
+/// Seconds from `t` to now.
+double secondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+}  // namespace
+
 class SolverImpl {
  public:
   explicit SolverImpl(const SolverSettings& settings) : settings_(settings) {
@@ -739,6 +748,7 @@ class SolverImpl {
       }
     }
     report.pyramid_levels = num_levels;
+    report.prepare_seconds = secondsSince(start);
 
     IterationState& s = state_;
     for (int li = num_levels - 1; li >= 0; --li) {
@@ -746,6 +756,7 @@ class SolverImpl {
       s.resize(level.width, level.height, level.num_inputs);
       const bool finest_level = li == 0;
       if (finest_level && use_warm) {
+        const Clock::time_point warm_start = Clock::now();
         // Warm start: the previous normals (sanitized) and duals, swapped in
         // rather than copied (same sizes: no allocation either way).
         std::swap(s.n0, out.normals);
@@ -777,7 +788,12 @@ class SolverImpl {
               level, settings_.huber_eps, settings_.penalty,
               settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
               active_, kFillPasses, edge_scratch_map_, threads_);
+          report.warm_start_seconds = secondsSince(warm_start);
           refineActive(level, s, report);
+          report.refine_seconds = secondsSince(warm_start) -
+                                  report.warm_start_seconds;
+        } else {
+          report.warm_start_seconds = secondsSince(warm_start);
         }
       } else {
         if (li + 1 < num_levels) {
@@ -789,9 +805,11 @@ class SolverImpl {
         s.p_v.fill(0.0f);
         for (PlanarImage& q : s.q) q.fill(0.0f);
       }
-      if (finest_level && use_warm && !levelFits()) {
-        // The budget went to the local refinement: the whole-image step
-        // would overrun it (its energies are then not measured).
+      if (finest_level && use_warm &&
+          (report.budget_exhausted || !levelFits())) {
+        // The budget went to the local refinement (it stopped on the
+        // deadline, or what is left would not hold a whole-image step): the
+        // whole-image step is left out (its energies are then not measured).
         report.budget_exhausted = true;
       } else {
         runLevel(level, s, finest_level, report);
@@ -819,8 +837,7 @@ class SolverImpl {
     } else {
       report.final_energy = report.energies.back();
     }
-    report.seconds =
-        std::chrono::duration<double>(Clock::now() - start).count();
+    report.seconds = secondsSince(start);
   }
 
  private:
@@ -980,8 +997,7 @@ class SolverImpl {
         }
       }
       if (accepted && decrease < settings_.relative_tolerance) break;
-      step_seconds =
-          std::chrono::duration<double>(Clock::now() - step_start).count();
+      step_seconds = secondsSince(step_start);
     }
     if (!reference) b.scatter(active_, s);
   }
@@ -999,18 +1015,15 @@ class SolverImpl {
                  : internal::energyFast(level, settings_.huber_eps,
                                         settings_.penalty, n, threads_);
     };
-    auto seconds_since = [](Clock::time_point t) {
-      return std::chrono::duration<double>(Clock::now() - t).count();
-    };
     const Clock::time_point level_start = Clock::now();
     double best = energy_of(s.n0);
-    const double energy_seconds = seconds_since(level_start);
+    const double energy_seconds = secondsSince(level_start);
     // What closing an outer step costs (normalize + energy), for the budget.
-    double finish_seconds = 1.5 * seconds_since(level_start);
+    double finish_seconds = 1.5 * secondsSince(level_start);
     if (finest) {
       report.initial_energy = best;
       report.energies.push_back(best);
-      report.energy_seconds.push_back(seconds_since(solve_start_));
+      report.energy_seconds.push_back(secondsSince(solve_start_));
     }
     s.n = s.n0;
     s.nbar = s.n0;
@@ -1051,7 +1064,7 @@ class SolverImpl {
         } else {
           internal::runInnerFast(level, params, s, k);
         }
-        seconds_per_iteration = seconds_since(chunk_start) / k;
+        seconds_per_iteration = secondsSince(chunk_start) / k;
         done += k;
         if (has_deadline_ &&
             Clock::now() + std::chrono::duration_cast<Clock::duration>(
@@ -1073,7 +1086,7 @@ class SolverImpl {
       const Clock::time_point finish_start = Clock::now();
       normalizeInto(s.n, candidate_, threads_);
       const double e = energy_of(candidate_);
-      finish_seconds = seconds_since(finish_start);
+      finish_seconds = secondsSince(finish_start);
       if (finest) {
         // The least a finest level costs: its first energy, a first chunk
         // of 2 iterations and one closing step.
@@ -1089,7 +1102,7 @@ class SolverImpl {
         s.nbar = s.n0;
         if (finest) {
           report.energies.push_back(e);
-          report.energy_seconds.push_back(seconds_since(solve_start_));
+          report.energy_seconds.push_back(secondsSince(solve_start_));
         }
         converged = decrease < tolerance;
       } else if (finest) {

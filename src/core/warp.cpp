@@ -1,7 +1,11 @@
 #include "normal_fusion/warp.h"
 
+#include <omp.h>
+
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "normal_fusion/errors.h"
 
@@ -60,13 +64,10 @@ bool blendable(const PlanarImage& normals, double u, double v) {
   return true;
 }
 
-}  // namespace
-
-void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
-                         const std::array<double, 9>& R_cur_prev) {
-  const std::array<double, 9> K_inv = K.inverse();
-  const auto& R = R_cur_prev;
-  // R must be a rotation: R R^T = I, det R = 1.
+/// Throws InputError unless R is a rotation (R R^T = I) and the state holds
+/// normals.
+void checkWarpArguments(const SolverState& state,
+                        const std::array<double, 9>& R) {
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       double d = 0.0;
@@ -76,10 +77,221 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       }
     }
   }
-  const int W = state.normals.width(), H = state.normals.height();
-  if (state.normals.channels() != 3 || W == 0 || H == 0) {
+  if (state.normals.channels() != 3 || state.normals.width() == 0 ||
+      state.normals.height() == 0) {
     throw InputError("warpStateByRotation: the state holds no normals");
   }
+}
+
+/// Where a current pixel comes from in the previous image: u_prev ~ K R^T
+/// K^-1 u_cur, the homography of a camera that rotated by R.
+class PreviousPixel {
+ public:
+  PreviousPixel(const CameraIntrinsics& K, const std::array<double, 9>& R) {
+    const std::array<double, 9> K_inv = K.inverse();
+    // A = K R^T K^-1.
+    double RtKinv[9];
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        RtKinv[3 * i + j] =
+            R[i] * K_inv[j] + R[3 + i] * K_inv[3 + j] + R[6 + i] * K_inv[6 + j];
+      }
+    }
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        A_[3 * i + j] = K.K[3 * i] * RtKinv[j] +
+                        K.K[3 * i + 1] * RtKinv[3 + j] +
+                        K.K[3 * i + 2] * RtKinv[6 + j];
+      }
+    }
+  }
+
+  /// The previous pixel (u, v) of pixel (x, y); false when it lies outside
+  /// the previous W x H image (or behind the camera). Positions within 1e-6
+  /// of the border count as on it (rounding of an identity warp).
+  bool at(int x, int y, int W, int H, double* u, double* v) const {
+    const double w = A_[6] * x + A_[7] * y + A_[8];
+    if (!(w > 1e-9)) return false;
+    const double inv_w = 1.0 / w;
+    *u = clampNear((A_[0] * x + A_[1] * y + A_[2]) * inv_w, W - 1.0);
+    *v = clampNear((A_[3] * x + A_[4] * y + A_[5]) * inv_w, H - 1.0);
+    return *u >= 0.0 && *v >= 0.0 && *u <= W - 1.0 && *v <= H - 1.0;
+  }
+
+ private:
+  static double clampNear(double t, double high) {
+    constexpr double kSlack = 1e-6;
+    if (t < 0.0 && t > -kSlack) return 0.0;
+    if (t > high && t < high + kSlack) return high;
+    return t;
+  }
+  double A_[9];
+};
+
+/// Bilinear blend of 3 planes at the corners i00, i00 + dx | i00 + dy,
+/// i00 + dy + dx (weights tx, ty), rotated by R: out = R blend.
+inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
+                           float tx, float ty, const float* R, float out[3]) {
+  float s[3];
+  for (int c = 0; c < 3; ++c) {
+    const float* p = src[c];
+    s[c] = (1 - ty) * ((1 - tx) * p[i00] + tx * p[i00 + dx]) +
+           ty * ((1 - tx) * p[i00 + dy] + tx * p[i00 + dy + dx]);
+  }
+  for (int r = 0; r < 3; ++r) {
+    out[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
+  }
+}
+
+}  // namespace
+
+void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
+                         const std::array<double, 9>& R_cur_prev) {
+  SolverState scratch;
+  warpStateByRotation(state, K, R_cur_prev, scratch, 1, DualWarp::kRotate);
+}
+
+void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
+                         const std::array<double, 9>& R_cur_prev,
+                         SolverState& scratch, int num_threads,
+                         DualWarp dual_warp) {
+  const auto& R = R_cur_prev;
+  checkWarpArguments(state, R);
+  const PreviousPixel previous(K, R);
+  const int W = state.normals.width(), H = state.normals.height();
+  const std::size_t N = state.normals.pixelCount();
+  const int L = static_cast<int>(state.dual_data.size());
+  const bool has_duals = state.compatible(W, H, L);
+  const int threads =
+      num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
+  // The warped state is written into the scratch buffers (sized once), then
+  // swapped in.
+  scratch.normals.resize(W, H, 3);
+  if (has_duals) {
+    scratch.dual_h.resize(W, H, 3);
+    scratch.dual_v.resize(W, H, 3);
+    scratch.dual_data.resize(L);
+    for (PlanarImage& q : scratch.dual_data) q.resize(W, H, 3);
+  }
+  // The duals' 3-plane groups (p_h, p_v, each q_l), source and destination.
+  const int dual_groups = has_duals ? 2 + L : 0;
+  auto dual_group = [](SolverState& st, int g) -> PlanarImage& {
+    return g == 0 ? st.dual_h : g == 1 ? st.dual_v : st.dual_data[g - 2];
+  };
+  float Rf[9];
+  for (int k = 0; k < 9; ++k) Rf[k] = static_cast<float>(R[k]);
+  const float cos_blend = kMinBlendCos;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float* n_prev[3] = {state.normals.plane(0), state.normals.plane(1),
+                            state.normals.plane(2)};
+  float* n_cur[3] = {scratch.normals.plane(0), scratch.normals.plane(1),
+                     scratch.normals.plane(2)};
+  // Rows in chunks of kChunk pixels: the chunk's source positions and the
+  // warped normals first, then each dual group over the chunk.
+  constexpr int kChunk = 64;
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x_begin = 0; x_begin < W; x_begin += kChunk) {
+      const int count = std::min(kChunk, W - x_begin);
+      int corner[kChunk];  // i00 of the source, -1: no prediction
+      int step_x[kChunk];  // i01 - i00 (0 or 1)
+      int step_y[kChunk];  // i10 - i00 (0 or W)
+      float t_x[kChunk], t_y[kChunk];
+      for (int j = 0; j < count; ++j) {
+        const int x = x_begin + j;
+        const std::size_t o = static_cast<std::size_t>(y) * W + x;
+        double u = 0.0, v = 0.0;
+        corner[j] = -1;
+        if (previous.at(x, y, W, H, &u, &v)) {
+          const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
+          const int dx = x0 + 1 < W ? 1 : 0, dy = y0 + 1 < H ? W : 0;
+          const float tx = static_cast<float>(u - x0);
+          const float ty = static_cast<float>(v - y0);
+          const int i00 = y0 * W + x0;
+          // An edge of the map between the source pixels that carry weight
+          // (blendable()): the current inputs decide there.
+          const int lo_x = tx > 0.999f ? dx : 0, hi_x = tx > 1e-3f ? dx : 0;
+          const int lo_y = ty > 0.999f ? dy : 0, hi_y = ty > 1e-3f ? dy : 0;
+          const int at[4] = {i00 + lo_y + lo_x, i00 + lo_y + hi_x,
+                             i00 + hi_y + lo_x, i00 + hi_y + hi_x};
+          bool blend = true;
+          for (int a = 0; a < 4 && blend; ++a) {
+            for (int b = a + 1; b < 4; ++b) {
+              const float dot = n_prev[0][at[a]] * n_prev[0][at[b]] +
+                                n_prev[1][at[a]] * n_prev[1][at[b]] +
+                                n_prev[2][at[a]] * n_prev[2][at[b]];
+              if (!(dot >= cos_blend)) {  // NaN too
+                blend = false;
+                break;
+              }
+            }
+          }
+          if (blend) {
+            // The blended normal, rotated into the current frame, unit.
+            float n[3];
+            bilinearRotate(n_prev, i00, dx, dy, tx, ty, Rf, n);
+            const float len =
+                std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            if (len > 1e-6f) {
+              for (int c = 0; c < 3; ++c) n_cur[c][o] = n[c] / len;
+              corner[j] = i00;
+              step_x[j] = dx;
+              step_y[j] = dy;
+              t_x[j] = tx;
+              t_y[j] = ty;
+            }
+          }
+        }
+        if (corner[j] < 0) {
+          // Uncovered: no prediction (NaN); the solver's warm start fills it.
+          for (int c = 0; c < 3; ++c) n_cur[c][o] = nan;
+        }
+      }
+      // The duals at the same positions, rotated (zero where no prediction),
+      // or all zero (DualWarp::kReset).
+      for (int g = 0; g < dual_groups; ++g) {
+        const PlanarImage& src = dual_group(state, g);
+        PlanarImage& dst = dual_group(scratch, g);
+        const float* from[3] = {src.data(), src.data() + N, src.data() + 2 * N};
+        float* to[3] = {dst.data(), dst.data() + N, dst.data() + 2 * N};
+        const std::size_t row = static_cast<std::size_t>(y) * W + x_begin;
+        if (dual_warp == DualWarp::kReset) {
+          for (int c = 0; c < 3; ++c) {
+            std::fill(to[c] + row, to[c] + row + count, 0.0f);
+          }
+          continue;
+        }
+        for (int j = 0; j < count; ++j) {
+          float p[3] = {0.0f, 0.0f, 0.0f};
+          if (corner[j] >= 0) {
+            bilinearRotate(from, corner[j], step_x[j], step_y[j], t_x[j],
+                           t_y[j], Rf, p);
+          }
+          for (int c = 0; c < 3; ++c) to[c][row + j] = p[c];
+        }
+      }
+    }
+  }
+  std::swap(state.normals, scratch.normals);
+  if (has_duals) {
+    std::swap(state.dual_h, scratch.dual_h);
+    std::swap(state.dual_v, scratch.dual_v);
+    std::swap(state.dual_data, scratch.dual_data);
+  } else {
+    // No usable duals: none (as a state without them).
+    state.dual_h = PlanarImage();
+    state.dual_v = PlanarImage();
+    state.dual_data.clear();
+  }
+}
+
+namespace internal {
+
+void warpStateByRotationReference(SolverState& state, const CameraIntrinsics& K,
+                                  const std::array<double, 9>& R_cur_prev) {
+  const auto& R = R_cur_prev;
+  checkWarpArguments(state, R);
+  const int W = state.normals.width(), H = state.normals.height();
   const int L = static_cast<int>(state.dual_data.size());
   SolverState warped;
   warped.normals.resize(W, H, 3);
@@ -89,26 +301,13 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
     warped.dual_v.resize(W, H, 3);
     warped.dual_data.assign(L, PlanarImage(W, H, 3));
   }
-  // Previous pixel of a current pixel: u_prev ~ K R^T K^-1 u_cur.
+  const PreviousPixel previous(K, R);
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
-      const double r_cur[3] = {K_inv[0] * x + K_inv[1] * y + K_inv[2],
-                               K_inv[3] * x + K_inv[4] * y + K_inv[5],
-                               K_inv[6] * x + K_inv[7] * y + K_inv[8]};
-      double r_prev[3];
-      for (int i = 0; i < 3; ++i) {
-        r_prev[i] = R[i] * r_cur[0] + R[3 + i] * r_cur[1] + R[6 + i] * r_cur[2];
-      }
-      const auto& Km = K.K;
-      const double w =
-          Km[6] * r_prev[0] + Km[7] * r_prev[1] + Km[8] * r_prev[2];
       float n[3];
-      bool inside = w > 1e-9;
+      double u = 0.0, v = 0.0;
+      bool inside = previous.at(x, y, W, H, &u, &v);
       if (inside) {
-        const double u =
-            (Km[0] * r_prev[0] + Km[1] * r_prev[1] + Km[2] * r_prev[2]) / w;
-        const double v =
-            (Km[3] * r_prev[0] + Km[4] * r_prev[1] + Km[5] * r_prev[2]) / w;
         // An edge of the map between the source pixels: a blend would be a
         // normal of neither side; the current inputs decide there.
         inside = sampleRotated(state.normals, u, v, R, n) &&
@@ -147,4 +346,5 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
   state = std::move(warped);
 }
 
+}  // namespace internal
 }  // namespace normal_fusion

@@ -311,7 +311,13 @@ void FusionPipeline::process(const InputSet& set,
       } else if (rotation(frame_id, previous_stamp_, stamp, &R_cur_prev,
                           &why)) {
         try {
-          warpStateByRotation(state_, problem_.K, R_cur_prev);
+          // With the local refinement the duals are reset (as good, and
+          // cheaper: see DualWarp).
+          warpStateByRotation(state_, problem_.K, R_cur_prev, warp_scratch_,
+                              solver_.settings().num_threads,
+                              solver_.settings().warm_refine_iterations > 0
+                                  ? DualWarp::kReset
+                                  : DualWarp::kRotate);
           rotated = true;
         } catch (const Error& e) {
           why = e.what();

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/synthetic.h"
@@ -111,6 +112,93 @@ TEST(Warp, IdentityKeepsTheStateAndBadRotationThrows) {
   }
   const std::array<double, 9> not_rotation{{2, 0, 0, 0, 1, 0, 0, 0, 1}};
   EXPECT_THROW(warpStateByRotation(state, frame.K, not_rotation), InputError);
+}
+
+/// A state of a scene's normals (with a few NaN holes) and random duals for
+/// L inputs.
+SolverState randomState(const NormalMap& normals, int L, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> dual(-1.0f, 1.0f);
+  const int W = normals.width(), H = normals.height();
+  SolverState state;
+  state.normals = normals;
+  state.dual_h = PlanarImage(W, H, 3);
+  state.dual_v = PlanarImage(W, H, 3);
+  state.dual_data.assign(L, PlanarImage(W, H, 3));
+  for (PlanarImage* p : {&state.dual_h, &state.dual_v, &state.dual_data[0],
+                         &state.dual_data[L - 1]}) {
+    for (std::size_t i = 0; i < p->pixelCount() * 3; ++i)
+      p->data()[i] = dual(rng);
+  }
+  for (int k = 0; k < 40; ++k) {
+    const int i = static_cast<int>(rng() % normals.pixelCount());
+    for (int c = 0; c < 3; ++c) state.normals.plane(c)[i] = NAN;
+  }
+  return state;
+}
+
+void expectSameImage(const PlanarImage& a, const PlanarImage& b,
+                     const char* what) {
+  ASSERT_TRUE(a.sameSize(b)) << what;
+  for (std::size_t i = 0; i < a.pixelCount() * a.channels(); ++i) {
+    const float x = a.data()[i], y = b.data()[i];
+    if (std::isnan(x) || std::isnan(y)) {
+      ASSERT_TRUE(std::isnan(x) && std::isnan(y)) << what << " at " << i;
+    } else {
+      ASSERT_NEAR(x, y, 1e-5f * std::max(1.0f, std::abs(y)))
+          << what << " at " << i;
+    }
+  }
+}
+
+/// The live stream's warp (threads, reused scratch) writes exactly what the
+/// per-pixel reference writes, frame after frame, duals included.
+TEST(Warp, FastWarpEqualsTheReference) {
+  const auto frames = synthetic::renderSequence(2, 96, 72, 4, 1.5);
+  for (int threads : {1, 2, 3}) {
+    SolverState fast = randomState(frames[0].normals_gt, 2, 7);
+    SolverState reference = fast;
+    SolverState scratch;
+    for (std::size_t k = 1; k < frames.size(); ++k) {
+      const auto R =
+          synthetic::relativeRotation(frames[k].pose, frames[k - 1].pose);
+      warpStateByRotation(fast, frames[k].K, R, scratch, threads);
+      internal::warpStateByRotationReference(reference, frames[k].K, R);
+      ASSERT_TRUE(fast.compatible(96, 72, 2));
+      expectSameImage(fast.normals, reference.normals, "normals");
+      expectSameImage(fast.dual_h, reference.dual_h, "p_h");
+      expectSameImage(fast.dual_v, reference.dual_v, "p_v");
+      for (int l = 0; l < 2; ++l) {
+        expectSameImage(fast.dual_data[l], reference.dual_data[l], "q_l");
+      }
+    }
+  }
+  // DualWarp::kReset: the same normals, every dual zero.
+  {
+    SolverState fast = randomState(frames[0].normals_gt, 2, 11);
+    SolverState reference = fast, scratch;
+    const auto R = synthetic::relativeRotation(frames[1].pose, frames[0].pose);
+    warpStateByRotation(fast, frames[1].K, R, scratch, 2, DualWarp::kReset);
+    internal::warpStateByRotationReference(reference, frames[1].K, R);
+    ASSERT_TRUE(fast.compatible(96, 72, 2));
+    expectSameImage(fast.normals, reference.normals, "normals");
+    for (const PlanarImage* p :
+         {&fast.dual_h, &fast.dual_v, &fast.dual_data[0], &fast.dual_data[1]}) {
+      for (std::size_t i = 0; i < p->pixelCount() * 3; ++i) {
+        ASSERT_EQ(p->data()[i], 0.0f) << i;
+      }
+    }
+  }
+  // Without duals: normals warped, no duals.
+  SolverState bare;
+  bare.normals = frames[0].normals_gt;
+  SolverState bare_reference = bare, scratch;
+  const auto R = synthetic::relativeRotation(frames[1].pose, frames[0].pose);
+  warpStateByRotation(bare, frames[1].K, R, scratch, 2);
+  internal::warpStateByRotationReference(bare_reference, frames[1].K, R);
+  expectSameImage(bare.normals, bare_reference.normals, "normals");
+  EXPECT_TRUE(bare.dual_h.empty());
+  EXPECT_TRUE(bare.dual_data.empty());
 }
 
 }  // namespace

@@ -136,6 +136,7 @@ class FusionPipeline {
   Solver solver_;
   FusionProblem problem_;
   SolverState state_;
+  SolverState warp_scratch_;  ///< buffers of the rotation warp, reused
   SolveReport report_;
   std::vector<NormalMap> raw_normals_;     ///< per input, as received
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
