@@ -59,6 +59,43 @@ namespace internal {
 
 namespace {
 
+/// One row of an input in the producer's convention to the optical frame:
+/// f = M n_in / |M n_in| and c = weight * clamp(confidence, 0, 1) where the
+/// normal is usable (finite, not zero; a non-finite confidence counts as 0);
+/// f = 0, c = 0 elsewhere. Branch-free (vectorised); `confidence` is read
+/// only with kHasConfidence.
+template <bool kHasConfidence>
+void convertInputRow(int W, const float* M_in, float weight,
+                     const float* __restrict nx, const float* __restrict ny,
+                     const float* __restrict nz,
+                     const float* __restrict confidence, float* __restrict fx,
+                     float* __restrict fy, float* __restrict fz,
+                     float* __restrict c) {
+  const float M[9] = {M_in[0], M_in[1], M_in[2], M_in[3], M_in[4],
+                      M_in[5], M_in[6], M_in[7], M_in[8]};
+  for (int x = 0; x < W; ++x) {
+    const float ix = nx[x], iy = ny[x], iz = nz[x];
+    // isValidNormal: not zero, not NaN, not infinite (NaN and overflow fail
+    // both comparisons).
+    const float s = ix * ix + iy * iy + iz * iz;
+    const bool usable = (s > 1e-12f) & (s < 1e30f);
+    // Clamped to [0, 1]; NaN and infinities count as 0.
+    float conf = kHasConfidence ? confidence[x] : 1.0f;
+    conf = (conf >= 0.0f) & (conf <= 3.4e38f) ? std::min(conf, 1.0f) : 0.0f;
+    const float ox = M[0] * ix + M[1] * iy + M[2] * iz;
+    const float oy = M[3] * ix + M[4] * iy + M[5] * iz;
+    const float oz = M[6] * ix + M[7] * iy + M[8] * iz;
+    const float inv =
+        1.0f / std::sqrt(std::max(ox * ox + oy * oy + oz * oz, 1e-30f));
+    const float w = usable ? weight * conf : 0.0f;
+    const bool keep = w > 0.0f;
+    fx[x] = keep ? ox * inv : 0.0f;
+    fy[x] = keep ? oy * inv : 0.0f;
+    fz[x] = keep ? oz * inv : 0.0f;
+    c[x] = keep ? w : 0.0f;
+  }
+}
+
 /// True when the data terms carry Huber thresholds: the unsquared penalty
 /// with a global or a local part of delta.
 bool usesDataHuber(const SolverSettings& settings) {
@@ -88,53 +125,67 @@ void prepareFinestInto(const FusionProblem& problem,
     level.data_weight[l].resize(W, H, 1);
   }
   const bool hard = settings.visibility == VisibilityMode::kHard;
+  for (int l = 0; l < level.num_inputs; ++l) {
+    const NormalInput& input = problem.inputs[l];
+    float M[9];
+    for (int k = 0; k < 9; ++k) M[k] = input.orientation.M[k];
+    const float global_weight =
+        static_cast<float>(settings.lambda * input.weight);
+    const float* conf_in =
+        input.confidence.empty() ? nullptr : input.confidence.plane(0);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int y = 0; y < H; ++y) {
+      const std::size_t row = static_cast<std::size_t>(y) * W;
+      (conf_in != nullptr
+           ? convertInputRow<true>
+           : convertInputRow<false>)(W, M, global_weight,
+                                     input.normals.plane(0) + row,
+                                     input.normals.plane(1) + row,
+                                     input.normals.plane(2) + row,
+                                     conf_in != nullptr ? conf_in + row
+                                                        : nullptr,
+                                     level.data[l].plane(0) + row,
+                                     level.data[l].plane(1) + row,
+                                     level.data[l].plane(2) + row,
+                                     level.data_weight[l].plane(0) + row);
+      if (hard) {
+        // Facing away from the camera (r . f > 0): ignored.
+        float* f[3] = {level.data[l].plane(0) + row,
+                       level.data[l].plane(1) + row,
+                       level.data[l].plane(2) + row};
+        float* c = level.data_weight[l].plane(0) + row;
+        for (int x = 0; x < W; ++x) {
+          float r[3];
+          level.ray(x, y, r);
+          if (r[0] * f[0][x] + r[1] * f[1][x] + r[2] * f[2][x] > 0.0f) {
+            f[0][x] = f[1][x] = f[2][x] = 0.0f;
+            c[x] = 0.0f;
+          }
+        }
+      }
+    }
+  }
+  // Pixels with at least one usable observation.
+  const int L = level.num_inputs;
   long valid = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : valid)
   for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      bool any_valid = false;
-      for (int l = 0; l < level.num_inputs; ++l) {
-        const NormalInput& input = problem.inputs[l];
-        const auto& M = input.orientation.M;
-        const float in[3] = {input.normals.plane(0)[i],
-                             input.normals.plane(1)[i],
-                             input.normals.plane(2)[i]};
-        float conf =
-            input.confidence.empty() ? 1.0f : input.confidence.plane(0)[i];
-        conf =
-            std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
-        float out[3] = {0.0f, 0.0f, 0.0f};
-        float weight = 0.0f;
-        if (isValidNormal(in[0], in[1], in[2]) && std::isfinite(in[0]) &&
-            std::isfinite(in[1]) && std::isfinite(in[2])) {
-          // Producer's convention to the optical frame: n = M n_in, normalized.
-          for (int r = 0; r < 3; ++r) {
-            out[r] =
-                M[3 * r] * in[0] + M[3 * r + 1] * in[1] + M[3 * r + 2] * in[2];
-          }
-          const float len =
-              std::sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2]);
-          for (float& v : out) v /= len;
-          weight = static_cast<float>(settings.lambda * input.weight) * conf;
-          if (hard) {
-            float r[3];
-            level.ray(x, y, r);
-            if (r[0] * out[0] + r[1] * out[1] + r[2] * out[2] > 0.0f) {
-              weight = 0.0f;  // facing away from the camera: ignored
-            }
-          }
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    const float* c0 = level.data_weight[0].plane(0) + row;
+    const float* c1 = L > 1 ? level.data_weight[1].plane(0) + row : c0;
+    long count = 0;
+    if (L <= 2) {
+      for (int x = 0; x < W; ++x) count += c0[x] > 0.0f || c1[x] > 0.0f;
+    } else {
+      for (int x = 0; x < W; ++x) {
+        bool any = false;
+        for (int l = 0; l < L; ++l) {
+          any = any || level.data_weight[l].plane(0)[row + x] > 0.0f;
         }
-        if (weight <= 0.0f) {
-          out[0] = out[1] = out[2] = 0.0f;
-          weight = 0.0f;
-        }
-        for (int ch = 0; ch < 3; ++ch) level.data[l].plane(ch)[i] = out[ch];
-        level.data_weight[l].plane(0)[i] = weight;
-        any_valid = any_valid || weight > 0.0f;
+        count += any ? 1 : 0;
       }
-      valid += any_valid ? 1 : 0;
     }
+    valid += count;
   }
   level.valid_pixels = static_cast<int>(valid);
   if (settings.hole_link_weight < 1.0 && valid < static_cast<long>(W) * H) {
@@ -790,8 +841,8 @@ class SolverImpl {
               active_, kFillPasses, edge_scratch_map_, threads_);
           report.warm_start_seconds = secondsSince(warm_start);
           refineActive(level, s, report);
-          report.refine_seconds = secondsSince(warm_start) -
-                                  report.warm_start_seconds;
+          report.refine_seconds =
+              secondsSince(warm_start) - report.warm_start_seconds;
         } else {
           report.warm_start_seconds = secondsSince(warm_start);
         }
