@@ -51,6 +51,9 @@ int main(int argc, char** argv) {
   // --still 1: the camera does not move (frame 0 over and over, new noise
   // each frame): what is left is the noise of each frame, not the motion.
   bool still = false;
+  // --reset-duals 0|1: the warp resets the duals (1) or rotates them (0);
+  // default: reset while the local refinement is on, as the node does.
+  int reset_duals = -1;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -76,6 +79,8 @@ int main(int argc, char** argv) {
       iterations = static_cast<int>(value);
     else if (key == "--refine")
       refine = static_cast<int>(value);
+    else if (key == "--reset-duals")
+      reset_duals = value != 0.0 ? 1 : 0;
     else {
       std::fprintf(stderr, "bench_streaming: unknown option %s\n", key.c_str());
       return 2;
@@ -89,6 +94,8 @@ int main(int argc, char** argv) {
   live.time_budget_ms = iterations > 0 ? 0.0 : budget_ms;
   live.max_total_inner_iterations = iterations > 0 ? iterations : 100000;
   if (refine >= 0) live.warm_refine_iterations = refine;
+  // As the node does: with the local refinement, the duals are reset.
+  if (reset_duals < 0) reset_duals = live.warm_refine_iterations > 0 ? 1 : 0;
   nf::SolverSettings converged;
   converged.num_threads = threads;
   converged.relative_tolerance = 1e-6;
@@ -132,10 +139,9 @@ int main(int argc, char** argv) {
         nf::synthetic::relativeRotation(sequence[k].pose, sequence[k - 1].pose);
     const auto warp_start = std::chrono::steady_clock::now();
     // As the node does: with the local refinement, the duals are reset.
-    nf::warpStateByRotation(state, problem.K, R_cur_prev, warp_scratch, threads,
-                            live.warm_refine_iterations > 0
-                                ? nf::DualWarp::kReset
-                                : nf::DualWarp::kRotate);
+    nf::warpStateByRotation(
+        state, problem.K, R_cur_prev, warp_scratch, threads,
+        reset_duals == 1 ? nf::DualWarp::kReset : nf::DualWarp::kRotate);
     const double warp_ms = std::chrono::duration<double, std::milli>(
                                std::chrono::steady_clock::now() - warp_start)
                                .count();

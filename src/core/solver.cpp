@@ -1047,7 +1047,13 @@ class SolverImpl {
           }
         }
       }
-      if (accepted && decrease < settings_.relative_tolerance) break;
+      // Converged: a small decrease, once at least half of the iterations
+      // ran (the first steps after the fill can be slow to start: a short
+      // step with little decrease is no sign of convergence there).
+      if (accepted && decrease < settings_.relative_tolerance &&
+          2 * report.refine_iterations >= settings_.warm_refine_iterations) {
+        break;
+      }
       step_seconds = secondsSince(step_start);
     }
     if (!reference) b.scatter(active_, s);
