@@ -54,6 +54,9 @@ int main(int argc, char** argv) {
   // --reset-duals 0|1: the warp resets the duals (1) or rotates them (0);
   // default: reset while the local refinement is on, as the node does.
   int reset_duals = -1;
+  // --refine-radius R: the local refinement's dilation (default: the
+  // solver's).
+  int refine_radius = -1;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -79,6 +82,8 @@ int main(int argc, char** argv) {
       iterations = static_cast<int>(value);
     else if (key == "--refine")
       refine = static_cast<int>(value);
+    else if (key == "--refine-radius")
+      refine_radius = static_cast<int>(value);
     else if (key == "--reset-duals")
       reset_duals = value != 0.0 ? 1 : 0;
     else {
@@ -94,6 +99,7 @@ int main(int argc, char** argv) {
   live.time_budget_ms = iterations > 0 ? 0.0 : budget_ms;
   live.max_total_inner_iterations = iterations > 0 ? iterations : 100000;
   if (refine >= 0) live.warm_refine_iterations = refine;
+  if (refine_radius >= 0) live.warm_refine_radius = refine_radius;
   // As the node does: with the local refinement, the duals are reset.
   if (reset_duals < 0) reset_duals = live.warm_refine_iterations > 0 ? 1 : 0;
   nf::SolverSettings converged;
@@ -155,13 +161,12 @@ int main(int argc, char** argv) {
     nf::warpStateByRotation(exact, problem.K, R_cur_prev);
     const double psnr_warped_gt =
         nf::psnr(exact.normals, sequence[k].normals_gt);
-    if (iterations == 0) {
-      // The frame's budget covers the warp and the solve: the solver gets
-      // what the warp left.
-      live.time_budget_ms = std::max(1.0, budget_ms - warp_ms);
-      live_solver.setSettings(live);
-    }
+    // The frame's budget covers the warp and the solve (not the measurements
+    // above).
     const auto start = std::chrono::steady_clock::now();
+    live_solver.setBudgetStart(
+        start - std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double, std::milli>(warp_ms)));
     live_solver.solve(problem, state, warm_start, report);
     const double solve_ms = std::chrono::duration<double, std::milli>(
                                 std::chrono::steady_clock::now() - start)

@@ -2,6 +2,7 @@
 // (Huber-TV on unit vectors, majorize-minimize, Chambolle-Pock).
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <vector>
 
@@ -104,6 +105,12 @@ class Solver {
   /// allocates no heap memory inside the solver.
   void solve(const FusionProblem& problem, SolverState& state, bool warm_start,
              SolveReport& report);
+
+  /// The next solve's time budget (SolverSettings::time_budget_ms) counts
+  /// from `frame_start` instead of from the call, so that work done for the
+  /// frame before the solve (the warp of the state) is inside the budget.
+  /// Applies to that one solve.
+  void setBudgetStart(std::chrono::steady_clock::time_point frame_start);
 
   /// Convenience: cold start, returns the fused normals.
   NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);

@@ -735,9 +735,11 @@ class SolverImpl {
     const Clock::time_point start = Clock::now();
     solve_start_ = start;
     has_deadline_ = settings_.time_budget_ms > 0.0;
-    deadline_ = start + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double, std::milli>(
-                                settings_.time_budget_ms));
+    deadline_ = (has_budget_start_ ? budget_start_ : start) +
+                std::chrono::duration_cast<Clock::duration>(
+                    std::chrono::duration<double, std::milli>(
+                        settings_.time_budget_ms));
+    has_budget_start_ = false;
     threads_ = resolveThreads(settings_.num_threads);
 
     // Reset the report but keep its vectors' capacity.
@@ -906,6 +908,13 @@ class SolverImpl {
   internal::EdgeWeightScratch edge_scratch_;
   Clock::time_point deadline_;
   Clock::time_point solve_start_;
+
+ public:
+  /// Solver::setBudgetStart().
+  Clock::time_point budget_start_;
+  bool has_budget_start_ = false;
+
+ private:
   bool has_deadline_ = false;
   int threads_ = 1;
   int remaining_inner_ = 0;
@@ -1196,6 +1205,11 @@ SolveReport Solver::solve(const FusionProblem& problem, SolverState& state,
   SolveReport report;
   impl_->solve(problem, state, warm_start, report);
   return report;
+}
+
+void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {
+  impl_->budget_start_ = frame_start;
+  impl_->has_budget_start_ = true;
 }
 
 void Solver::solve(const FusionProblem& problem, SolverState& state,

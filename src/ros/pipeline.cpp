@@ -333,6 +333,8 @@ void FusionPipeline::process(const InputSet& set,
   }
 
   try {
+    // time_budget_ms covers the whole frame: conversion, warp and solve.
+    solver_.setBudgetStart(started);
     solver_.solve(problem_, state_, warm, report_);
   } catch (...) {
     resetWarmStart();

@@ -500,6 +500,32 @@ TEST(Solver, TimeBudgetReturnsTheBestIterateSoFar) {
   EXPECT_LE(report.final_energy, report.initial_energy);
 }
 
+/// setBudgetStart(): the budget counts from the given time (work before the
+/// solve is inside it), for one solve only.
+TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings;
+  settings.time_budget_ms = 2000.0;
+  settings.inner_iterations = 10;
+  settings.max_total_inner_iterations = 200;
+  settings.relative_tolerance = 0.0;
+  Solver solver(settings);
+  SolverState state;
+  SolveReport report;
+  // The frame began 10 s ago: its budget is spent before the solve starts.
+  solver.setBudgetStart(std::chrono::steady_clock::now() -
+                        std::chrono::seconds(10));
+  solver.solve(problem, state, false, report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 200);
+  expectUnit(state.normals);
+  // The next solve counts from its own start again: all 200 iterations.
+  solver.solve(problem, state, false, report);
+  EXPECT_FALSE(report.budget_exhausted);
+  EXPECT_EQ(report.inner_iterations, 200);
+}
+
 TEST(Solver, StopsOnIterationCapAndTolerance) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(32, 24, 0.5, &gt);
