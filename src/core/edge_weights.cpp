@@ -2,6 +2,8 @@
 // Gaussian pre-smoothing, 3x3 Sobel gradients, w = max(w_min, g(|grad|)).
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "normal_fusion/detail/solver_internal.h"
@@ -105,6 +107,39 @@ void differenceMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
   }
 }
 
+/// g <- max(w_min, exp(scale g)) over a row (scale g <= 0), branch-free and
+/// vectorised: exp(t) = 2^k exp(r), k = round(t / ln 2), r = t - k ln 2 in
+/// [-ln 2 / 2, ln 2 / 2] (ln 2 split in two for exactness), exp(r) by its
+/// Taylor polynomial to r^7, 2^k built in the exponent bits; t below -87
+/// (exp < 1.7e-38) is clamped there. Relative error below 2e-7 against the
+/// double exp of the same g while exp(t) >= 0.05 (below, the float product
+/// scale g carries more rounding; the weights are floored at w_min there).
+void exponentialWeightRow(int W, float scale, float w_min,
+                          float* __restrict g) {
+  constexpr float kLog2e = 1.44269504088896341f;
+  constexpr float kLn2Hi = 0.693359375f;
+  constexpr float kLn2Lo = -2.12194440e-4f;
+  for (int x = 0; x < W; ++x) {
+    const float t = std::max(scale * g[x], -87.0f);
+    // k = round(t / ln 2) for t <= 0 (truncation of t / ln 2 - 0.5).
+    const int k = static_cast<int>(t * kLog2e - 0.5f);
+    const float kf = static_cast<float>(k);
+    const float r = (t - kf * kLn2Hi) - kf * kLn2Lo;
+    float p = 1.0f / 5040.0f;
+    p = p * r + 1.0f / 720.0f;
+    p = p * r + 1.0f / 120.0f;
+    p = p * r + 1.0f / 24.0f;
+    p = p * r + 1.0f / 6.0f;
+    p = p * r + 0.5f;
+    p = p * r + 1.0f;
+    p = p * r + 1.0f;
+    const std::int32_t bits = (k + 127) << 23;
+    float two_k;
+    std::memcpy(&two_k, &bits, sizeof(two_k));
+    g[x] = std::max(w_min, p * two_k);
+  }
+}
+
 }  // namespace
 
 namespace internal {
@@ -146,13 +181,18 @@ void computeEdgeWeightsInto(const ColorImage& image,
       }
       src = scratch.plane.data();
     }
-    gaussianBlur(src, scratch.blurred.data(), W, H, settings.smoothing_sigma,
-                 scratch, threads);
+    // Pre-smoothing (none at sigma 0: the plane itself).
+    const float* smoothed = src;
+    if (settings.smoothing_sigma > 0.0) {
+      gaussianBlur(src, scratch.blurred.data(), W, H, settings.smoothing_sigma,
+                   scratch, threads);
+      smoothed = scratch.blurred.data();
+    }
     if (settings.gradient == EdgeGradient::kSobel) {
-      sobelMagnitudeMax(scratch.blurred.data(), scratch.mag_h.data(),
-                        scratch.mag_v.data(), W, H, threads);
+      sobelMagnitudeMax(smoothed, scratch.mag_h.data(), scratch.mag_v.data(), W,
+                        H, threads);
     } else {
-      differenceMagnitudeMax(scratch.blurred.data(), scratch.mag_h.data(),
+      differenceMagnitudeMax(smoothed, scratch.mag_h.data(),
                              scratch.mag_v.data(), W, H, threads);
     }
   }
@@ -173,16 +213,31 @@ void computeEdgeWeightsInto(const ColorImage& image,
   // (centred on pixels) use the stronger of the two; forward differences
   // already sit between them.
   const bool centred = settings.gradient == EdgeGradient::kSobel;
+  // The common case (exponential, beta = 1): w = max(w_min, exp(-alpha g))
+  // in float, row by row, vectorised.
+  const bool fast = exponential && beta == 1.0;
+  const float minus_alpha = static_cast<float>(-alpha);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    float* w_h = weights.plane(0) + row;
+    float* w_v = weights.plane(1) + row;
+    // The gradient on each link, into the weight rows first.
     for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float gh =
+      const std::size_t i = row + x;
+      w_h[x] =
           centred && x + 1 < W ? std::max(mag_h[i], mag_h[i + 1]) : mag_h[i];
-      const float gv =
+      w_v[x] =
           centred && y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
-      weights.plane(0)[i] = weight_of(gh);
-      weights.plane(1)[i] = weight_of(gv);
+    }
+    if (fast) {
+      exponentialWeightRow(W, minus_alpha, w_min, w_h);
+      exponentialWeightRow(W, minus_alpha, w_min, w_v);
+    } else {
+      for (int x = 0; x < W; ++x) {
+        w_h[x] = weight_of(w_h[x]);
+        w_v[x] = weight_of(w_v[x]);
+      }
     }
   }
 }
