@@ -499,36 +499,72 @@ int markInconsistentPixels(const PreparedLevel& level,
       2.0 * std::sin(0.5 * kInconsistentDegrees * 3.14159265358979 / 180.0));
   // Two standard errors of a full window's mean per unit of spread.
   const float standard_errors = 2.0f / (2 * local_radius + 1);
+  const float* n[3] = {normals.plane(0), normals.plane(1), normals.plane(2)};
   long marked = 0;
+  // Chunks of kChunk pixels: per input, branch-free (vectorised) counts of
+  // the inputs that observe each pixel and of those that contradict it.
+  constexpr long kChunk = 512;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : marked)
-  for (long i = 0; i < N; ++i) {
-    if (unknown[i] != 0) continue;
-    // Every input that observes the pixel (with a spread in its window) must
-    // contradict it: one input's artifacts do not count.
-    int observing = 0, contradicting = 0;
+  for (long begin = 0; begin < N; begin += kChunk) {
+    const int count = static_cast<int>(std::min(kChunk, N - begin));
+    unsigned char observing[kChunk] = {};
+    unsigned char contradicting[kChunk] = {};
     for (int l = 0; l < L; ++l) {
-      const PlanarImage& m = level.data_mean[l];
-      const float spread = m.plane(3)[i];
-      if (!(level.data_weight[l].plane(0)[i] > 0.0f) || spread < 0.0f) {
-        continue;
+      const PlanarImage& mean = level.data_mean[l];
+      const float* m[4] = {mean.plane(0) + begin, mean.plane(1) + begin,
+                           mean.plane(2) + begin, mean.plane(3) + begin};
+      const float* c = level.data_weight[l].plane(0) + begin;
+      const float* nx = n[0] + begin;
+      const float* ny = n[1] + begin;
+      const float* nz = n[2] + begin;
+      for (int k = 0; k < count; ++k) {
+        // An input observes the pixel when it has a sample there and a
+        // spread in its window; it contradicts the warm normal when |n - m_l|
+        // exceeds chord + 2 s_l / sqrt(window).
+        const bool observes = (c[k] > 0.0f) & (m[3][k] >= 0.0f);
+        const float dx = nx[k] - m[0][k], dy = ny[k] - m[1][k],
+                    dz = nz[k] - m[2][k];
+        const float limit = chord + standard_errors * m[3][k];
+        const bool contradicts =
+            observes & (dx * dx + dy * dy + dz * dz > limit * limit);
+        observing[k] += observes ? 1 : 0;
+        contradicting[k] += contradicts ? 1 : 0;
       }
-      // |n - m_l| against chord + 2 s_l / sqrt(window).
-      float d2 = 0.0f;
-      for (int c = 0; c < 3; ++c) {
-        const float d = normals.plane(c)[i] - m.plane(c)[i];
-        d2 += d * d;
-      }
-      const float limit = chord + standard_errors * spread;
-      ++observing;
-      if (d2 > limit * limit) ++contradicting;
     }
-    if (observing > 0 && contradicting == observing) {
-      unknown[i] = 1;
-      ++marked;
+    // Every input that observes the pixel must contradict it: one input's
+    // artifacts do not count.
+    unsigned char* u = unknown.data() + begin;
+    for (int k = 0; k < count; ++k) {
+      const bool mark =
+          (u[k] == 0) & (observing[k] > 0) & (contradicting[k] == observing[k]);
+      u[k] = mark ? 1 : u[k];
+      marked += mark ? 1 : 0;
     }
   }
   return static_cast<int>(marked);
 }
+
+namespace {
+
+/// edge[i + k] for k < count: pixel i + k is known (u == 0) and one of its
+/// neighbours left + k, right + k, up + k, down + k is not unknown (u != 1)
+/// and more than acos(min_cos) away. Branch-free (vectorised).
+void mapEdgesRow(int count, float min_cos, const float* __restrict nx,
+                 const float* __restrict ny, const float* __restrict nz,
+                 const unsigned char* __restrict u, int i, int left, int right,
+                 int up, int down, unsigned char* __restrict edge) {
+  for (int k = 0; k < count; ++k) {
+    const float x0 = nx[i + k], y0 = ny[i + k], z0 = nz[i + k];
+    auto apart = [&](int j) {
+      return (u[j] != 1) & (x0 * nx[j] + y0 * ny[j] + z0 * nz[j] < min_cos);
+    };
+    const bool any =
+        apart(left + k) | apart(right + k) | apart(up + k) | apart(down + k);
+    edge[i + k] = (u[i + k] == 0) & any ? 1 : 0;
+  }
+}
+
+}  // namespace
 
 int markMapEdges(const PlanarImage& normals,
                  std::vector<unsigned char>& unknown,
@@ -540,21 +576,32 @@ int markMapEdges(const PlanarImage& normals,
   const float* ny = normals.plane(1);
   const float* nz = normals.plane(2);
   edge.resize(unknown.size());
+  const unsigned char* u = unknown.data();
   long marked = 0;
 #pragma omp parallel num_threads(threads)
   {
-    // The edges into `edge` (reading `unknown` only), then merged.
+    // The edges into `edge` (reading `unknown` only), then merged. A
+    // neighbour j of pixel i is apart when it is not unknown (!= 1) and
+    // their normals are more than kInconsistentDegrees apart; i is an edge
+    // when it is known (0) and some 4-neighbour is apart.
 #pragma omp for schedule(static)
     for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        const int i = y * W + x;
-        auto apart = [&](int j) {
-          return unknown[j] != 1 &&
-                 nx[i] * nx[j] + ny[i] * ny[j] + nz[i] * nz[j] < min_cos;
-        };
-        edge[i] = unknown[i] == 0 &&
-                  ((x > 0 && apart(i - 1)) || (x + 1 < W && apart(i + 1)) ||
-                   (y > 0 && apart(i - W)) || (y + 1 < H && apart(i + W)));
+      const int row = y * W;
+      // Neighbours above and below (the row itself at the image's border,
+      // never apart from itself).
+      const int up = y > 0 ? row - W : row;
+      const int down = y + 1 < H ? row + W : row;
+      // The first and last columns (their missing neighbour: themselves),
+      // then the interior (vectorised).
+      auto mark = [&](int x, int left, int right) {
+        mapEdgesRow(1, min_cos, nx, ny, nz, u, row + x, left, right, up + x,
+                    down + x, edge.data());
+      };
+      mark(0, row, std::min(row + 1, row + W - 1));
+      if (W > 1) mark(W - 1, row + W - 2, row + W - 1);
+      if (W > 2) {
+        mapEdgesRow(W - 2, min_cos, nx, ny, nz, u, row + 1, row, row + 2,
+                    up + 1, down + 1, edge.data());
       }
     }
 #pragma omp for schedule(static) reduction(+ : marked)

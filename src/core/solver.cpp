@@ -508,31 +508,79 @@ void initializeCold(const PreparedLevel& level, VisibilityMode mode,
   }
 }
 
+/// One row of a warm start's normals made usable, branch-free
+/// (vectorised): n / |n|, projected onto the visible set in soft mode
+/// (projectVisible(), with the ray K^-1 (x, y, 1) in float); missing[x] = 1
+/// where |n| is zero, tiny or not finite (n is then left for coldNormal()).
+template <bool kSoft>
+void sanitizeWarmRow(int W, float y, const float* Ki, float* __restrict nx,
+                     float* __restrict ny, float* __restrict nz,
+                     unsigned char* __restrict missing) {
+  const float ry0 = Ki[1] * y + Ki[2], ry1 = Ki[4] * y + Ki[5],
+              ry2 = Ki[7] * y + Ki[8];
+  for (int x = 0; x < W; ++x) {
+    const float len2 = nx[x] * nx[x] + ny[x] * ny[x] + nz[x] * nz[x];
+    // Not NaN, not infinite (both comparisons fail), not tiny.
+    const bool usable = (len2 > 1e-12f) & (len2 < 3.4e38f);
+    missing[x] = usable ? 0 : 1;
+    const float inv = 1.0f / std::sqrt(usable ? len2 : 1.0f);
+    float v0 = nx[x] * inv, v1 = ny[x] * inv, v2 = nz[x] * inv;
+    if (kSoft) {
+      // projectVisible(): facing away (r . v > 0) -> onto the plane normal
+      // to r, or -r / |r| when v is (nearly) r itself.
+      const float fx = static_cast<float>(x);
+      const float r0 = Ki[0] * fx + ry0, r1 = Ki[3] * fx + ry1,
+                  r2 = Ki[6] * fx + ry2;
+      const float rn = r0 * v0 + r1 * v1 + r2 * v2;
+      const float rr = r0 * r0 + r1 * r1 + r2 * r2;
+      const float m0 = v0 * rr - r0 * rn, m1 = v1 * rr - r1 * rn,
+                  m2 = v2 * rr - r2 * rn;
+      const float m_len = std::sqrt(m0 * m0 + m1 * m1 + m2 * m2);
+      const bool away = rn > 0.0f;
+      const bool degenerate = m_len <= 1e-6f * rr;
+      const float inv_m = 1.0f / (degenerate ? 1.0f : m_len);
+      const float inv_r = 1.0f / std::sqrt(rr);
+      const float p0 = degenerate ? -r0 * inv_r : m0 * inv_m;
+      const float p1 = degenerate ? -r1 * inv_r : m1 * inv_m;
+      const float p2 = degenerate ? -r2 * inv_r : m2 * inv_m;
+      v0 = away ? p0 : v0;
+      v1 = away ? p1 : v1;
+      v2 = away ? p2 : v2;
+    }
+    nx[x] = usable ? v0 : nx[x];
+    ny[x] = usable ? v1 : ny[x];
+    nz[x] = usable ? v2 : nz[x];
+  }
+}
+
 /// A warm start's normals made usable: normalized, projected onto the visible
 /// set in soft mode; pixels without one (NaN, zero: e.g. uncovered by a
 /// warp) get the cold start and unknown = 1 (W * H entries, resized).
 void sanitizeWarmNormals(const PreparedLevel& level, VisibilityMode mode,
                          PlanarImage& n, std::vector<unsigned char>& unknown,
                          int threads) {
-  unknown.resize(static_cast<std::size_t>(level.width) * level.height);
+  const int W = level.width;
+  unknown.resize(static_cast<std::size_t>(W) * level.height);
+  const bool soft = mode == VisibilityMode::kSoft;
+  const float Ki[9] = {
+      static_cast<float>(level.K_inv[0]), static_cast<float>(level.K_inv[1]),
+      static_cast<float>(level.K_inv[2]), static_cast<float>(level.K_inv[3]),
+      static_cast<float>(level.K_inv[4]), static_cast<float>(level.K_inv[5]),
+      static_cast<float>(level.K_inv[6]), static_cast<float>(level.K_inv[7]),
+      static_cast<float>(level.K_inv[8])};
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < level.height; ++y) {
-    for (int x = 0; x < level.width; ++x) {
-      float v[3] = {n.at(0, y, x), n.at(1, y, x), n.at(2, y, x)};
-      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-      const bool missing = !(len > 1e-6f) || !std::isfinite(len);
-      unknown[static_cast<std::size_t>(y) * level.width + x] = missing ? 1 : 0;
-      if (missing) {
-        coldNormal(level, mode, x, y, v);
-      } else {
-        for (float& value : v) value /= len;
-        if (mode == VisibilityMode::kSoft) {
-          float r[3];
-          level.ray(x, y, r);
-          internal::projectVisible(r, v);
-        }
-      }
-      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    (soft ? sanitizeWarmRow<true>
+          : sanitizeWarmRow<false>)(W, static_cast<float>(y), Ki,
+                                    n.plane(0) + row, n.plane(1) + row,
+                                    n.plane(2) + row, unknown.data() + row);
+    // The missing ones start as a cold start would.
+    for (int x = 0; x < W; ++x) {
+      if (unknown[row + x] == 0) continue;
+      float v[3];
+      coldNormal(level, mode, x, y, v);
+      for (int c = 0; c < 3; ++c) n.plane(c)[row + x] = v[c];
     }
   }
 }
