@@ -139,6 +139,7 @@ int main(int argc, char** argv) {
       live_solver.setSettings(startup);
       live_solver.solve(problem, state, false, report);
       live_solver.setSettings(live);
+      warp_scratch.resize(width, height, 2);
       continue;
     }
     const auto R_cur_prev =

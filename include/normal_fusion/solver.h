@@ -36,6 +36,10 @@ struct SolverState {
 
   /// True when the state can warm-start a problem of this size and input count.
   bool compatible(int width, int height, int num_inputs) const;
+  /// Sizes every buffer for that problem (allocates only when a size
+  /// changes): e.g. a warp's scratch state before the stream starts, so that
+  /// the first warm frame does not pay for it.
+  void resize(int width, int height, int num_inputs);
   void clear();
 };
 

@@ -752,6 +752,14 @@ bool SolverState::compatible(int width, int height, int num_inputs) const {
              [this](const PlanarImage& q) { return q.sameSize(normals); });
 }
 
+void SolverState::resize(int width, int height, int num_inputs) {
+  normals.resize(width, height, 3);
+  dual_h.resize(width, height, 3);
+  dual_v.resize(width, height, 3);
+  dual_data.resize(num_inputs);
+  for (PlanarImage& q : dual_data) q.resize(width, height, 3);
+}
+
 void SolverState::clear() {
   normals = NormalMap();
   dual_h = PlanarImage();

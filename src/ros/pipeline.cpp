@@ -336,6 +336,10 @@ void FusionPipeline::process(const InputSet& set,
     // time_budget_ms covers the whole frame: conversion, warp and solve.
     solver_.setBudgetStart(started);
     solver_.solve(problem_, state_, warm, report_);
+    // The warp's buffers, sized with the state (allocates on the first frame
+    // of a size only).
+    warp_scratch_.resize(state_.normals.width(), state_.normals.height(),
+                         static_cast<int>(state_.dual_data.size()));
   } catch (...) {
     resetWarmStart();
     throw;

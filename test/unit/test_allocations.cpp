@@ -126,5 +126,32 @@ TEST(Allocations, NonePerWarpedFrameWithLocalRefinement) {
   }
 }
 
+/// With the warp's scratch sized with the state after the cold start
+/// (SolverState::resize), even the first warp of a stream allocates nothing.
+/// (The solver's refinement buffers are sized on the cold start for 1/16 of
+/// the pixels and may grow in a first warm frame that needs more, as on this
+/// small image.)
+TEST(Allocations, NoneInTheFirstWarp) {
+  FusionProblem problem = cylinderTwoInputs();
+  SolverSettings settings;
+  settings.max_total_inner_iterations = 20;
+  settings.num_threads = 2;
+  Solver solver(settings);
+  SolverState state, warp_scratch;
+  solver.solve(problem, state, false);
+  warp_scratch.resize(problem.image.width(), problem.image.height(), 2);
+  const double a = 0.5 * 3.14159265358979 / 180.0;
+  const std::array<double, 9> R = {std::cos(a),  0, std::sin(a), 0, 1, 0,
+                                   -std::sin(a), 0, std::cos(a)};
+  for (DualWarp duals : {DualWarp::kReset, DualWarp::kRotate}) {
+    const long count = allocationsDuring([&] {
+      warpStateByRotation(state, problem.K, R, warp_scratch, 2, duals);
+    });
+    EXPECT_EQ(count, 0);
+    EXPECT_TRUE(
+        state.compatible(problem.image.width(), problem.image.height(), 2));
+  }
+}
+
 }  // namespace
 }  // namespace normal_fusion
