@@ -299,6 +299,25 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
   }
 }
 
+/// One row of the window means m = s / |s| of a resultant s (0 where |s| is
+/// tiny) and the spread (-1 there). Branch-free (vectorised).
+void meanSpreadRow(int W, const float* __restrict sx,
+                   const float* __restrict sy, const float* __restrict sz,
+                   const float* __restrict spread, float* __restrict mx,
+                   float* __restrict my, float* __restrict mz,
+                   float* __restrict m_spread) {
+  for (int x = 0; x < W; ++x) {
+    const float ax = sx[x], ay = sy[x], az = sz[x], s = spread[x];
+    const float len = std::sqrt(ax * ax + ay * ay + az * az);
+    const float some = len > 1e-6f ? 1.0f : 0.0f;
+    const float inv = some / std::max(len, 1e-6f);
+    mx[x] = ax * inv;
+    my[x] = ay * inv;
+    mz[x] = az * inv;
+    m_spread[x] = some * s + (some - 1.0f);
+  }
+}
+
 }  // namespace
 
 void applyLocalStatistics(const SolverSettings& settings,
@@ -355,17 +374,9 @@ void applyLocalStatistics(const SolverSettings& settings,
       // The normalized window mean m and the spread s, before the density
       // correction changes c (0 and -1 where there is none).
       if (mean_spread != nullptr) {
-        float* m[4] = {mean_spread->plane(0) + off, mean_spread->plane(1) + off,
-                       mean_spread->plane(2) + off,
-                       mean_spread->plane(3) + off};
-        for (int x = 0; x < W; ++x) {
-          const float len =
-              std::sqrt(win[0][x] * win[0][x] + win[1][x] * win[1][x] +
-                        win[2][x] * win[2][x]);
-          const float inv = len > 1e-6f ? 1.0f / len : 0.0f;
-          for (int k = 0; k < 3; ++k) m[k][x] = win[k][x] * inv;
-          m[3][x] = len > 1e-6f ? spread[x] : -1.0f;
-        }
+        meanSpreadRow(W, win[0], win[1], win[2], spread,
+                      mean_spread->plane(0) + off, mean_spread->plane(1) + off,
+                      mean_spread->plane(2) + off, mean_spread->plane(3) + off);
       }
       // c(x) *= (window / count)^density_power: a sample of a sparse input
       // speaks for the pixels around it that the input misses.
@@ -701,12 +712,17 @@ void validateProblem(const FusionProblem& problem) {
     throw InputError("image: expected 1 (grey) or 3 (RGB) channels, got " +
                      std::to_string(image.channels()));
   }
+  // Every value finite (v - v is 0 exactly then, NaN otherwise); one
+  // branch-free pass.
   const std::size_t total = image.pixelCount() * image.channels();
+  const float* values = image.data();
+  unsigned bad = 0;
   for (std::size_t i = 0; i < total; ++i) {
-    if (!std::isfinite(image.data()[i])) {
-      throw InputError(
-          "image: expected finite intensities, found a non-finite value");
-    }
+    bad |= values[i] - values[i] == 0.0f ? 0u : 1u;
+  }
+  if (bad != 0) {
+    throw InputError(
+        "image: expected finite intensities, found a non-finite value");
   }
   problem.K.validate();
   if (problem.inputs.empty()) {
