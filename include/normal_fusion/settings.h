@@ -105,7 +105,9 @@ struct SolverSettings {
   /// first, every other pixel held fixed, for warm_refine_iterations inner
   /// iterations (outer steps of 5; not counted in max_total_inner_iterations,
   /// but stopped by the time budget; relative_tolerance stops it only after
-  /// half of them); the whole image follows if time is left. Costs in proportion to those pixels, not the image. 0 = off.
+  /// half of them); the whole image follows without a time budget (with one,
+  /// the warm frame ends with the refinement). Costs in proportion to those
+  /// pixels, not the image. 0 = off.
   int warm_refine_iterations = 100;
   int warm_refine_radius = 1;
 

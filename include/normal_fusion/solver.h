@@ -56,9 +56,10 @@ struct SolveReport {
   int refined_pixels = 0;     ///< pixels of the warm start's local refinement
   int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
   /// E at the finest level: start, then each accepted outer step. Empty
-  /// (and initial_energy, final_energy NaN) when a warm start's local
-  /// refinement used up the time budget, so that the whole-image step was
-  /// left out.
+  /// (and initial_energy, final_energy NaN) when the whole-image step was
+  /// left out after a warm start's local refinement: always under a time
+  /// budget (live), otherwise when the refinement used up the iterations'
+  /// time.
   std::vector<double> energies;
   std::vector<double> energy_seconds;  ///< when each of `energies` was reached,
                                        ///< since the solve began

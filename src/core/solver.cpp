@@ -930,11 +930,19 @@ class SolverImpl {
         s.p_v.fill(0.0f);
         for (PlanarImage& q : s.q) q.fill(0.0f);
       }
-      if (finest_level && use_warm &&
-          (report.budget_exhausted || !levelFits())) {
-        // The budget went to the local refinement (it stopped on the
-        // deadline, or what is left would not hold a whole-image step): the
-        // whole-image step is left out (its energies are then not measured).
+      if (finest_level && use_warm && settings_.warm_refine_iterations > 0 &&
+          has_deadline_) {
+        // Live (a time budget and the local refinement): the frame's time
+        // goes to the refinement, and the frame ends when it does. The
+        // whole-image steps after it gained nothing where measured (camera
+        // still, 150 whole-image iterations after the refinement: every
+        // outer step rejected, E would rise, with reset or warped duals) and,
+        // started near the deadline, overran it. Their energies are not
+        // measured.
+      } else if (finest_level && use_warm &&
+                 (report.budget_exhausted || !levelFits())) {
+        // The budget went to the local refinement: the whole-image step is
+        // left out (its energies are then not measured).
         report.budget_exhausted = true;
       } else {
         runLevel(level, s, finest_level, report);

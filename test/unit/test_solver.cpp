@@ -526,6 +526,43 @@ TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
   EXPECT_EQ(report.inner_iterations, 200);
 }
 
+/// Live (a time budget and the local refinement): a warm frame's time goes
+/// to the refinement and the frame ends with it; no whole-image iterations
+/// even when time is left. Without a budget they follow.
+TEST(Solver, LiveWarmFrameEndsWithItsRefinement) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings;
+  settings.max_total_inner_iterations = 100;
+  Solver solver(settings);
+  SolverState state;
+  solver.solve(problem, state, false);
+  // Unknown pixels for the refinement: a band of NaN normals.
+  auto with_band = [&] {
+    SolverState warm = state;
+    for (int y = 10; y < 20; ++y) {
+      for (int c = 0; c < 3; ++c) warm.normals.at(c, y, 30) = NAN;
+    }
+    return warm;
+  };
+  settings.time_budget_ms = 10000.0;
+  solver.setSettings(settings);
+  SolverState live = with_band();
+  SolveReport report;
+  solver.solve(problem, live, true, report);
+  EXPECT_GT(report.refine_iterations, 0);
+  EXPECT_EQ(report.inner_iterations, 0);
+  EXPECT_TRUE(report.energies.empty());
+  expectUnit(live.normals);
+  settings.time_budget_ms = 0.0;
+  solver.setSettings(settings);
+  SolverState offline = with_band();
+  solver.solve(problem, offline, true, report);
+  EXPECT_GT(report.refine_iterations, 0);
+  EXPECT_GT(report.inner_iterations, 0);
+  EXPECT_FALSE(report.energies.empty());
+}
+
 TEST(Solver, StopsOnIterationCapAndTolerance) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(32, 24, 0.5, &gt);
