@@ -118,13 +118,17 @@ class PreviousPixel {
     return *u >= 0.0 && *v >= 0.0 && *u <= W - 1.0 && *v <= H - 1.0;
   }
 
- private:
+  /// A = K R^T K^-1, row-major.
+  const double* matrix() const { return A_; }
+
   static double clampNear(double t, double high) {
     constexpr double kSlack = 1e-6;
     if (t < 0.0 && t > -kSlack) return 0.0;
     if (t > high && t < high + kSlack) return high;
     return t;
   }
+
+ private:
   double A_[9];
 };
 
@@ -140,6 +144,93 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
   }
   for (int r = 0; r < 3; ++r) {
     out[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
+  }
+}
+
+// The chunk kernel is compiled for AVX-512, AVX2 and baseline x86-64 (GCC
+// function multiversioning; gathers where the target has them).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define NF_WARP_MULTIVERSION \
+  __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#else
+#define NF_WARP_MULTIVERSION
+#endif
+
+/// Where a chunk of pixels of one row comes from, and their warped normals:
+/// the arithmetic of PreviousPixel::at(), blendable() and bilinearRotate()
+/// per pixel, branch-free (vectorised). Writes n_cur (NaN where no
+/// prediction) and, per pixel, the source's first corner (-1: none), its
+/// steps to the right and down, and the blend weights.
+NF_WARP_MULTIVERSION
+void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
+                      int count, const float* __restrict n0,
+                      const float* __restrict n1, const float* __restrict n2,
+                      const float* R, float cos_blend, float* __restrict out0,
+                      float* __restrict out1, float* __restrict out2,
+                      int* __restrict corner, int* __restrict step_x,
+                      int* __restrict step_y, float* __restrict t_x,
+                      float* __restrict t_y) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int j = 0; j < count; ++j) {
+    const int x = x_begin + j;
+    // PreviousPixel::at().
+    const double w = A[6] * x + A[7] * y + A[8];
+    const double inv_w = 1.0 / w;
+    const double u =
+        PreviousPixel::clampNear((A[0] * x + A[1] * y + A[2]) * inv_w, W - 1.0);
+    const double v =
+        PreviousPixel::clampNear((A[3] * x + A[4] * y + A[5]) * inv_w, H - 1.0);
+    const bool inside =
+        (w > 1e-9) & (u >= 0.0) & (v >= 0.0) & (u <= W - 1.0) & (v <= H - 1.0);
+    // Safe indices everywhere (the outside ones are not used).
+    const double us = inside ? u : 0.0, vs = inside ? v : 0.0;
+    const int x0 = static_cast<int>(us), y0 = static_cast<int>(vs);
+    const int dx = x0 + 1 < W ? 1 : 0, dy = y0 + 1 < H ? W : 0;
+    const float tx = static_cast<float>(us - x0);
+    const float ty = static_cast<float>(vs - y0);
+    const int i00 = y0 * W + x0;
+    // blendable(): the corners that carry weight, all pairs within
+    // kMaxBlendDegrees (NaN fails).
+    const int lo_x = tx > 0.999f ? dx : 0, hi_x = tx > 1e-3f ? dx : 0;
+    const int lo_y = ty > 0.999f ? dy : 0, hi_y = ty > 1e-3f ? dy : 0;
+    const int at[4] = {i00 + lo_y + lo_x, i00 + lo_y + hi_x, i00 + hi_y + lo_x,
+                       i00 + hi_y + hi_x};
+    // The four corners that carry weight (some may coincide).
+    const float ax = n0[at[0]], ay = n1[at[0]], az = n2[at[0]];
+    const float bx = n0[at[1]], by = n1[at[1]], bz = n2[at[1]];
+    const float cx = n0[at[2]], cy = n1[at[2]], cz = n2[at[2]];
+    const float dx_ = n0[at[3]], dy_ = n1[at[3]], dz = n2[at[3]];
+    auto near = [cos_blend](float px, float py, float pz, float qx, float qy,
+                            float qz) {
+      return px * qx + py * qy + pz * qz >= cos_blend;
+    };
+    const bool blend =
+        near(ax, ay, az, bx, by, bz) & near(ax, ay, az, cx, cy, cz) &
+        near(ax, ay, az, dx_, dy_, dz) & near(bx, by, bz, cx, cy, cz) &
+        near(bx, by, bz, dx_, dy_, dz) & near(cx, cy, cz, dx_, dy_, dz);
+    // bilinearRotate(): the blend, rotated into the current frame.
+    const float* src[3] = {n0, n1, n2};
+    float s[3];
+    for (int k = 0; k < 3; ++k) {
+      const float* p = src[k];
+      s[k] = (1 - ty) * ((1 - tx) * p[i00] + tx * p[i00 + dx]) +
+             ty * ((1 - tx) * p[i00 + dy] + tx * p[i00 + dy + dx]);
+    }
+    float n[3];
+    for (int r = 0; r < 3; ++r) {
+      n[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
+    }
+    const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const bool ok = inside & blend & (len > 1e-6f);
+    const float safe_len = ok ? len : 1.0f;
+    out0[j] = ok ? n[0] / safe_len : nan;
+    out1[j] = ok ? n[1] / safe_len : nan;
+    out2[j] = ok ? n[2] / safe_len : nan;
+    corner[j] = ok ? i00 : -1;
+    step_x[j] = dx;
+    step_y[j] = dy;
+    t_x[j] = tx;
+    t_y[j] = ty;
   }
 }
 
@@ -181,7 +272,6 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
   float Rf[9];
   for (int k = 0; k < 9; ++k) Rf[k] = static_cast<float>(R[k]);
   const float cos_blend = kMinBlendCos;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
   const float* n_prev[3] = {state.normals.plane(0), state.normals.plane(1),
                             state.normals.plane(2)};
   float* n_cur[3] = {scratch.normals.plane(0), scratch.normals.plane(1),
@@ -197,56 +287,11 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       int step_x[kChunk];  // i01 - i00 (0 or 1)
       int step_y[kChunk];  // i10 - i00 (0 or W)
       float t_x[kChunk], t_y[kChunk];
-      for (int j = 0; j < count; ++j) {
-        const int x = x_begin + j;
-        const std::size_t o = static_cast<std::size_t>(y) * W + x;
-        double u = 0.0, v = 0.0;
-        corner[j] = -1;
-        if (previous.at(x, y, W, H, &u, &v)) {
-          const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
-          const int dx = x0 + 1 < W ? 1 : 0, dy = y0 + 1 < H ? W : 0;
-          const float tx = static_cast<float>(u - x0);
-          const float ty = static_cast<float>(v - y0);
-          const int i00 = y0 * W + x0;
-          // An edge of the map between the source pixels that carry weight
-          // (blendable()): the current inputs decide there.
-          const int lo_x = tx > 0.999f ? dx : 0, hi_x = tx > 1e-3f ? dx : 0;
-          const int lo_y = ty > 0.999f ? dy : 0, hi_y = ty > 1e-3f ? dy : 0;
-          const int at[4] = {i00 + lo_y + lo_x, i00 + lo_y + hi_x,
-                             i00 + hi_y + lo_x, i00 + hi_y + hi_x};
-          bool blend = true;
-          for (int a = 0; a < 4 && blend; ++a) {
-            for (int b = a + 1; b < 4; ++b) {
-              const float dot = n_prev[0][at[a]] * n_prev[0][at[b]] +
-                                n_prev[1][at[a]] * n_prev[1][at[b]] +
-                                n_prev[2][at[a]] * n_prev[2][at[b]];
-              if (!(dot >= cos_blend)) {  // NaN too
-                blend = false;
-                break;
-              }
-            }
-          }
-          if (blend) {
-            // The blended normal, rotated into the current frame, unit.
-            float n[3];
-            bilinearRotate(n_prev, i00, dx, dy, tx, ty, Rf, n);
-            const float len =
-                std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-            if (len > 1e-6f) {
-              for (int c = 0; c < 3; ++c) n_cur[c][o] = n[c] / len;
-              corner[j] = i00;
-              step_x[j] = dx;
-              step_y[j] = dy;
-              t_x[j] = tx;
-              t_y[j] = ty;
-            }
-          }
-        }
-        if (corner[j] < 0) {
-          // Uncovered: no prediction (NaN); the solver's warm start fills it.
-          for (int c = 0; c < 3; ++c) n_cur[c][o] = nan;
-        }
-      }
+      const std::size_t row = static_cast<std::size_t>(y) * W + x_begin;
+      warpNormalsChunk(previous.matrix(), W, H, y, x_begin, count, n_prev[0],
+                       n_prev[1], n_prev[2], Rf, cos_blend, n_cur[0] + row,
+                       n_cur[1] + row, n_cur[2] + row, corner, step_x, step_y,
+                       t_x, t_y);
       // The duals at the same positions, rotated (zero where no prediction),
       // or all zero (DualWarp::kReset).
       for (int g = 0; g < dual_groups; ++g) {
@@ -254,7 +299,6 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
         PlanarImage& dst = dual_group(scratch, g);
         const float* from[3] = {src.data(), src.data() + N, src.data() + 2 * N};
         float* to[3] = {dst.data(), dst.data() + N, dst.data() + 2 * N};
-        const std::size_t row = static_cast<std::size_t>(y) * W + x_begin;
         if (dual_warp == DualWarp::kReset) {
           for (int c = 0; c < 3; ++c) {
             std::fill(to[c] + row, to[c] + row + count, 0.0f);
