@@ -1,9 +1,11 @@
 // Streaming benchmark: a 640x480 synthetic sequence with slow camera motion and
 // two inputs (paper noise and depth-camera noise), solved frame after frame,
 // warm-started from the previous frame (rotation-compensated) within a
-// per-frame time budget, against a fully converged cold solve of each frame.
-// Prints a table per frame and the worst case. Not a test: timings depend on
-// the machine and its load.
+// per-frame time budget that covers the warp of the state and the solve, as
+// in the node, against a fully converged cold solve of each frame. Prints a
+// table per frame (with the phases of the live frame: warp, preparation, warm
+// start, refinement) and the worst case. Not a test: timings depend on the
+// machine and its load.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
