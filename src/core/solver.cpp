@@ -49,6 +49,10 @@ constexpr double kBudgetMargin = 1.5;
 /// pixel further from the known ones).
 constexpr int kFillPasses = 16;
 
+/// The largest finite float (comparisons against it reject infinities and
+/// NaN alike).
+constexpr float kFloatMax = std::numeric_limits<float>::max();
+
 int resolveThreads(int requested) {
   return requested > 0 ? requested : std::max(1, omp_get_num_procs());
 }
@@ -81,7 +85,7 @@ void convertInputRow(int W, const float* M_in, float weight,
     const bool usable = (s > 1e-12f) & (s < 1e30f);
     // Clamped to [0, 1]; NaN and infinities count as 0.
     float conf = kHasConfidence ? confidence[x] : 1.0f;
-    conf = (conf >= 0.0f) & (conf <= 3.4e38f) ? std::min(conf, 1.0f) : 0.0f;
+    conf = (conf >= 0.0f) & (conf <= kFloatMax) ? std::min(conf, 1.0f) : 0.0f;
     const float ox = M[0] * ix + M[1] * iy + M[2] * iz;
     const float oy = M[3] * ix + M[4] * iy + M[5] * iz;
     const float oz = M[6] * ix + M[7] * iy + M[8] * iz;
@@ -532,7 +536,7 @@ void sanitizeWarmRow(int W, float y, const float* Ki, float* __restrict nx,
   for (int x = 0; x < W; ++x) {
     const float len2 = nx[x] * nx[x] + ny[x] * ny[x] + nz[x] * nz[x];
     // Not NaN, not infinite (both comparisons fail), not tiny.
-    const bool usable = (len2 > 1e-12f) & (len2 < 3.4e38f);
+    const bool usable = (len2 > 1e-12f) & (len2 <= kFloatMax);
     missing[x] = usable ? 0 : 1;
     const float inv = 1.0f / std::sqrt(usable ? len2 : 1.0f);
     float v0 = nx[x] * inv, v1 = ny[x] * inv, v2 = nz[x] * inv;

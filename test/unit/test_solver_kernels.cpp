@@ -3,6 +3,7 @@
 // reference.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <initializer_list>
 #include <limits>
@@ -252,6 +253,90 @@ TEST(LocalStatistics, ThresholdsFollowTheSpreadAndSparseSamplesCountMore) {
   settings.data_eps_local = 1.0;
   settings.penalty = DataPenalty::kSquaredL2;
   EXPECT_FALSE(internal::prepareFinest(problem, settings).data_huber);
+}
+
+/// The conversion of an input (orientation, validity, confidence, hard
+/// visibility) against a per-pixel oracle, on every kind of bad value: NaN,
+/// infinite, zero, tiny and huge normals; NaN, infinite, negative and > 1
+/// confidences.
+TEST(PreparedData, ConversionOfEveryKindOfValue) {
+  const int W = 16, H = 4;
+  const float inf = std::numeric_limits<float>::infinity();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float normals[][3] = {{0.2f, -0.3f, -0.9f}, {nan, 0.0f, -1.0f},
+                              {inf, 0.0f, -1.0f},   {0.0f, 0.0f, 0.0f},
+                              {1e-7f, 0.0f, 0.0f},  {3e15f, 0.0f, -3e15f},
+                              {0.0f, 0.0f, 2.0f},   {0.5f, 0.5f, -0.1f}};
+  const float confidences[] = {1.0f, 0.5f, 0.0f, -0.2f, 1.7f, nan, inf, 0.25f};
+  FusionProblem problem;
+  problem.image = ColorImage(W, H, 1, 0.5f);
+  problem.K = CameraIntrinsics(20.0, 20.0, (W - 1) / 2.0, (H - 1) / 2.0);
+  NormalInput input;
+  input.normals = NormalMap(W, H, 3);
+  input.confidence = ScalarMap(W, H, 1);
+  input.weight = 2.0;
+  input.orientation = Orientation::opengl();
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const float* n = normals[(x + 3 * y) % 8];
+      for (int c = 0; c < 3; ++c) input.normals.at(c, y, x) = n[c];
+      input.confidence.at(0, y, x) = confidences[(2 * x + y) % 8];
+    }
+  }
+  problem.inputs = {input};
+  for (VisibilityMode mode : {VisibilityMode::kSoft, VisibilityMode::kHard}) {
+    SolverSettings settings;
+    settings.lambda = 0.5;
+    settings.visibility = mode;
+    settings.data_eps_local = 0.0;
+    settings.density_power = 0.0;
+    const internal::PreparedLevel level =
+        internal::prepareFinest(problem, settings);
+    int valid = 0;
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        // Oracle: usable = finite and not (nearly) zero; f = M n / |M n|;
+        // c = lambda * weight * clamp(confidence, 0, 1), a non-finite
+        // confidence counting 0; in hard mode 0 where f faces away (r . f >
+        // 0); f = 0 wherever c = 0.
+        const float* n = normals[(x + 3 * y) % 8];
+        const double s =
+            double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2];
+        const bool usable = std::isfinite(s) && s > 1e-12 && s < 1e30;
+        float conf = confidences[(2 * x + y) % 8];
+        conf =
+            std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
+        double f[3] = {0.0, 0.0, 0.0};
+        double c = 0.0;
+        if (usable) {
+          const auto& M = input.orientation.M;
+          double len = 0.0;
+          for (int r = 0; r < 3; ++r) {
+            f[r] = double(M[3 * r]) * n[0] + double(M[3 * r + 1]) * n[1] +
+                   double(M[3 * r + 2]) * n[2];
+            len += f[r] * f[r];
+          }
+          for (double& v : f) v /= std::sqrt(len);
+          c = 0.5 * 2.0 * conf;
+          if (mode == VisibilityMode::kHard) {
+            const double ray[3] = {(x - (W - 1) / 2.0) / 20.0,
+                                   (y - (H - 1) / 2.0) / 20.0, 1.0};
+            if (ray[0] * f[0] + ray[1] * f[1] + ray[2] * f[2] > 0.0) c = 0.0;
+          }
+        }
+        if (!(c > 0.0)) f[0] = f[1] = f[2] = c = 0.0;
+        valid += c > 0.0 ? 1 : 0;
+        EXPECT_NEAR(level.data_weight[0].at(0, y, x), c, 1e-6) << x << "," << y;
+        for (int k = 0; k < 3; ++k) {
+          EXPECT_NEAR(level.data[0].at(k, y, x), f[k], 1e-6)
+              << x << "," << y << " component " << k;
+        }
+      }
+    }
+    EXPECT_EQ(level.valid_pixels, valid);
+    EXPECT_GT(valid, 0);
+    EXPECT_LT(valid, W * H);
+  }
 }
 
 /// Links between two unobserved pixels are weakened by hole_link_weight; links
