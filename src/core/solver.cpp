@@ -666,6 +666,12 @@ void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
 
 namespace internal {
 
+void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
+                       PlanarImage& normals,
+                       std::vector<unsigned char>& unknown, int threads) {
+  sanitizeWarmNormals(level, mode, normals, unknown, threads);
+}
+
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
               const PlanarImage& normals, int num_threads) {
   const int W = level.width, H = level.height;

@@ -8,6 +8,7 @@
 #include <initializer_list>
 #include <limits>
 #include <utility>
+#include <vector>
 
 #include "normal_fusion/detail/solver_internal.h"
 #include "test_util.h"
@@ -336,6 +337,74 @@ TEST(PreparedData, ConversionOfEveryKindOfValue) {
     EXPECT_EQ(level.valid_pixels, valid);
     EXPECT_GT(valid, 0);
     EXPECT_LT(valid, W * H);
+  }
+}
+
+/// The warm start's sanitizing against a per-pixel oracle (normalize, then
+/// projectVisible() in soft mode; unusable normals flagged and replaced by a
+/// unit cold-start normal).
+TEST(WarmStart, SanitizingOfEveryKindOfValue) {
+  const int W = 37, H = 5;
+  const float inf = std::numeric_limits<float>::infinity();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float normals[][3] = {
+      {0.2f, -0.3f, -0.9f}, {nan, 0.0f, -1.0f},   {inf, 0.0f, -1.0f},
+      {0.0f, 0.0f, 0.0f},   {1e-7f, 0.0f, 0.0f},  {0.0f, 0.0f, 2.0f},
+      {0.3f, 0.1f, 0.4f},   {-3.0f, 1.0f, -0.5f}, {0.05f, 0.0f, 1.0f}};
+  FusionProblem problem;
+  problem.image = ColorImage(W, H, 1, 0.5f);
+  problem.K = CameraIntrinsics(10.0, 10.0, (W - 1) / 2.0, (H - 1) / 2.0);
+  NormalInput input;
+  input.normals = NormalMap(W, H, 3);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) input.normals.at(2, y, x) = -1.0f;
+  }
+  problem.inputs = {input};
+  for (VisibilityMode mode : {VisibilityMode::kSoft, VisibilityMode::kHard}) {
+    SolverSettings settings;
+    settings.visibility = mode;
+    const internal::PreparedLevel level =
+        internal::prepareFinest(problem, settings);
+    NormalMap warm(W, H, 3);
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        for (int c = 0; c < 3; ++c) {
+          warm.at(c, y, x) = normals[(x + 2 * y) % 9][c];
+        }
+      }
+    }
+    std::vector<unsigned char> unknown;
+    NormalMap sanitized = warm;
+    internal::sanitizeWarmStart(level, mode, sanitized, unknown, 2);
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const float* n = normals[(x + 2 * y) % 9];
+        const double s =
+            double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2];
+        const bool usable = std::isfinite(s) && s > 1e-12;
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        ASSERT_EQ(unknown[i], usable ? 0 : 1) << x << "," << y;
+        float v[3];
+        double len2 = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          v[c] = sanitized.at(c, y, x);
+          len2 += double(v[c]) * v[c];
+        }
+        EXPECT_NEAR(len2, 1.0, 1e-5) << x << "," << y;
+        if (!usable) continue;
+        float e[3];
+        const float len = static_cast<float>(std::sqrt(s));
+        for (int c = 0; c < 3; ++c) e[c] = n[c] / len;
+        if (mode == VisibilityMode::kSoft) {
+          float r[3];
+          level.ray(x, y, r);
+          internal::projectVisible(r, e);
+        }
+        for (int c = 0; c < 3; ++c) {
+          EXPECT_NEAR(v[c], e[c], 2e-6f) << x << "," << y << " component " << c;
+        }
+      }
+    }
   }
 }
 

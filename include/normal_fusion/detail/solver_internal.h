@@ -115,6 +115,14 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
                     IterationState& state, const ActiveSet& active,
                     int iterations);
 
+/// A warm start's normals made usable (what the solver does first with
+/// them): n / |n|, projected onto the visible set in soft mode
+/// (projectVisible()); pixels without a usable one (NaN, infinite, zero,
+/// tiny) take the cold start and unknown = 1, the others unknown = 0.
+void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
+                       PlanarImage& normals,
+                       std::vector<unsigned char>& unknown, int threads);
+
 /// Fills the unknown pixels of a warm start (known[i] == 0; all of them in
 /// `active`) inwards from the known ones (known[i] == 1), pass by pass: a pixel
 /// next to a known one takes, among the normals of its known 4-neighbours and
