@@ -121,7 +121,8 @@ int main(int argc, char** argv) {
       still ? ", camera still" : "");
   std::printf(
       "| frame | frame ms | warp ms | solve ms | prepare ms | warm start ms | "
-      "refine ms | inner its | refined px | refine its | warm | PSNR live (dB) "
+      "refine ms | whole-image its (outer steps / rejected) | refined px | "
+      "refine its | warm | PSNR live (dB) "
       "| PSNR converged (dB) | deficit (dB) | PSNR warm start (dB) | PSNR "
       "warped ground truth (dB) |\n");
   std::printf(
@@ -185,11 +186,14 @@ int main(int argc, char** argv) {
     sum_ms += ms;
     sum_deficit += deficit;
     std::printf(
-        "| %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %d | %d | %d | %s | "
+        "| %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %d (%d / %d) | %d | "
+        "%d | "
+        "%s | "
         "%.2f | %.2f | %.3f | %.2f | %.2f |\n",
         k, ms, warp_ms, solve_ms, 1e3 * report.prepare_seconds,
         1e3 * report.warm_start_seconds, 1e3 * report.refine_seconds,
-        report.inner_iterations, report.refined_pixels,
+        report.inner_iterations, report.outer_iterations,
+        report.rejected_outer_steps, report.refined_pixels,
         report.refine_iterations, report.warm_started ? "yes" : "no", psnr_live,
         psnr_best, deficit, psnr_start, psnr_warped_gt);
     std::fflush(stdout);

@@ -944,11 +944,11 @@ class SolverImpl {
           has_deadline_) {
         // Live (a time budget and the local refinement): the frame's time
         // goes to the refinement, and the frame ends when it does. The
-        // whole-image steps after it gained nothing where measured (camera
-        // still, 150 whole-image iterations after the refinement: every
-        // outer step rejected, E would rise, with reset or warped duals) and,
-        // started near the deadline, overran it. Their energies are not
-        // measured.
+        // whole-image steps after it gained nothing where measured
+        // (bench_streaming --iterations 150 --refine 100, camera moving or
+        // still, duals reset or warped: every outer step rejected, E would
+        // rise) and, started near the deadline, overran it. Their energies
+        // are not measured.
       } else if (finest_level && use_warm &&
                  (report.budget_exhausted || !levelFits())) {
         // The budget went to the local refinement: the whole-image step is
