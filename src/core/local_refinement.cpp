@@ -200,7 +200,7 @@ void ActiveBuffers::preallocate(int W, int H, int L, int active) {
 }
 
 void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
-                           const ActiveSet& active) {
+                           const ActiveSet& active, int threads) {
   const int W = level.width, H = level.height;
   const int L = level.num_inputs;
   const std::size_t N = static_cast<std::size_t>(W) * H;
@@ -208,7 +208,8 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   num_active = static_cast<int>(active.pixels.size());
   const int P = num_active;
   if (node_of.size() != N) node_of.assign(N, -1);
-  // Nodes: the active pixels, then the ghosts met through the links.
+  // Nodes: the active pixels, then the ghosts met through the links (one
+  // thread: the numbering).
   node_pixel.clear();
   for (int i : active.pixels) {
     node_of[i] = static_cast<int>(node_pixel.size());
@@ -228,22 +229,21 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   growTo(link_b, links);
   growTo(link_w, links);
   for (auto& component : p) growTo(component, links);
+  // The left (upper) pixel of link m.
+  auto link_pixel = [&](int m) {
+    return m < num_links_h ? active.links_h[m]
+                           : active.links_v[m - num_links_h];
+  };
   for (int m = 0; m < num_links; ++m) {
-    const bool horizontal = m < num_links_h;
-    const int i =
-        horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
-    const int j = horizontal ? i + 1 : i + W;
-    const PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+    const int i = link_pixel(m);
     link_a[m] = node(i);
-    link_b[m] = node(j);
-    link_w[m] = level.edge_weight.plane(horizontal ? 0 : 1)[i];
-    for (int ch = 0; ch < 3; ++ch) p[ch][m] = dual.plane(ch)[i];
+    link_b[m] = node(m < num_links_h ? i + 1 : i + W);
   }
   // The dummy link: no force.
   link_a[num_links] = link_b[num_links] = 0;
   link_w[num_links] = 0.0f;
   for (int ch = 0; ch < 3; ++ch) p[ch][num_links] = 0.0f;
-  const std::size_t num_nodes = node_pixel.size();
+  const long num_nodes = static_cast<long>(node_pixel.size());
   for (int ch = 0; ch < 3; ++ch) {
     growTo(nbar[ch], num_nodes);
     growTo(n[ch], P);
@@ -252,44 +252,61 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
     growTo(d[ch], P);
   }
   for (int ch = 0; ch < 3; ++ch) growTo(node_n[ch], num_nodes);
-  for (std::size_t k = 0; k < num_nodes; ++k) {
-    // Every node starts at n0 (ghosts stay there).
-    for (int ch = 0; ch < 3; ++ch) {
-      nbar[ch][k] = node_n[ch][k] = s.n0.plane(ch)[node_pixel[k]];
-    }
-  }
   growTo(q, static_cast<std::size_t>(3) * L * P);
   growTo(f, static_cast<std::size_t>(3) * L * P);
   growTo(c, static_cast<std::size_t>(L) * P);
   growTo(delta, static_cast<std::size_t>(L) * P);
   for (auto& list : pixel_links) growTo(list, P);
-  for (int k = 0; k < P; ++k) {
-    const int i = node_pixel[k];
-    float r[3];
-    level.ray(i % W, i / W, r);
-    for (int ch = 0; ch < 3; ++ch) {
-      n[ch][k] = n0[ch][k] = s.n0.plane(ch)[i];
-      ray[ch][k] = r[ch];
+    // The values, copied in parallel.
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < num_links; ++m) {
+      const bool horizontal = m < num_links_h;
+      const int i = link_pixel(m);
+      const PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+      link_w[m] = level.edge_weight.plane(horizontal ? 0 : 1)[i];
+      for (int ch = 0; ch < 3; ++ch) p[ch][m] = dual.plane(ch)[i];
     }
-    for (int l = 0; l < L; ++l) {
+    // Every node starts at n0 (ghosts stay there).
+#pragma omp for schedule(static) nowait
+    for (long k = 0; k < num_nodes; ++k) {
       for (int ch = 0; ch < 3; ++ch) {
-        q[(3 * l + ch) * P + k] = s.q[l].plane(ch)[i];
-        f[(3 * l + ch) * P + k] = level.data[l].plane(ch)[i];
+        nbar[ch][k] = node_n[ch][k] = s.n0.plane(ch)[node_pixel[k]];
       }
-      c[l * P + k] = level.data_weight[l].plane(0)[i];
-      delta[l * P + k] =
-          level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0f;
     }
-    for (auto& list : pixel_links) list[k] = num_links;
+#pragma omp for schedule(static)
+    for (int k = 0; k < P; ++k) {
+      const int i = node_pixel[k];
+      float r[3];
+      level.ray(i % W, i / W, r);
+      for (int ch = 0; ch < 3; ++ch) {
+        n[ch][k] = n0[ch][k] = s.n0.plane(ch)[i];
+        ray[ch][k] = r[ch];
+      }
+      for (int l = 0; l < L; ++l) {
+        for (int ch = 0; ch < 3; ++ch) {
+          q[(3 * l + ch) * P + k] = s.q[l].plane(ch)[i];
+          f[(3 * l + ch) * P + k] = level.data[l].plane(ch)[i];
+        }
+        c[l * P + k] = level.data_weight[l].plane(0)[i];
+        delta[l * P + k] =
+            level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0f;
+      }
+      for (auto& list : pixel_links) list[k] = num_links;
+    }
+    // Each link is the right (below) link of its first node and the left
+    // (above) link of its second (one link per entry: no two threads write
+    // the same one).
+#pragma omp for schedule(static) nowait
+    for (int m = 0; m < num_links; ++m) {
+      const int side = m < num_links_h ? 0 : 2;
+      if (link_a[m] < P) pixel_links[side][link_a[m]] = m;
+      if (link_b[m] < P) pixel_links[side + 1][link_b[m]] = m;
+    }
+#pragma omp for schedule(static)
+    for (long k = 0; k < num_nodes; ++k) node_of[node_pixel[k]] = -1;
   }
-  // Each link is the right (below) link of its first node and the left
-  // (above) link of its second.
-  for (int m = 0; m < num_links; ++m) {
-    const int side = m < num_links_h ? 0 : 2;
-    if (link_a[m] < P) pixel_links[side][link_a[m]] = m;
-    if (link_b[m] < P) pixel_links[side + 1][link_b[m]] = m;
-  }
-  for (std::size_t k = 0; k < num_nodes; ++k) node_of[node_pixel[k]] = -1;
 }
 
 void ActiveBuffers::normalizeCandidate() {
@@ -308,23 +325,29 @@ void ActiveBuffers::acceptCandidate() {
   }
 }
 
-void ActiveBuffers::scatter(const ActiveSet& active, IterationState& s) const {
+void ActiveBuffers::scatter(const ActiveSet& active, IterationState& s,
+                            int threads) const {
   const int L = num_inputs, P = num_active;
-  for (int k = 0; k < P; ++k) {
-    const int i = node_pixel[k];
-    for (int ch = 0; ch < 3; ++ch) {
-      s.n0.plane(ch)[i] = n0[ch][k];
-      for (int l = 0; l < L; ++l) {
-        s.q[l].plane(ch)[i] = q[(3 * l + ch) * P + k];
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(static) nowait
+    for (int k = 0; k < P; ++k) {
+      const int i = node_pixel[k];
+      for (int ch = 0; ch < 3; ++ch) {
+        s.n0.plane(ch)[i] = n0[ch][k];
+        for (int l = 0; l < L; ++l) {
+          s.q[l].plane(ch)[i] = q[(3 * l + ch) * P + k];
+        }
       }
     }
-  }
-  for (int m = 0; m < num_links; ++m) {
-    const bool horizontal = m < num_links_h;
-    const int i =
-        horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
-    PlanarImage& dual = horizontal ? s.p_h : s.p_v;
-    for (int ch = 0; ch < 3; ++ch) dual.plane(ch)[i] = p[ch][m];
+#pragma omp for schedule(static)
+    for (int m = 0; m < num_links; ++m) {
+      const bool horizontal = m < num_links_h;
+      const int i =
+          horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
+      PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+      for (int ch = 0; ch < 3; ++ch) dual.plane(ch)[i] = p[ch][m];
+    }
   }
 }
 

@@ -1084,7 +1084,7 @@ class SolverImpl {
         n_saved_.resize(3 * pixels.size());
       }
     } else {
-      b.gather(level, s, active_);
+      b.gather(level, s, active_, threads_);
       best = b.energy(settings_.huber_eps, settings_.penalty);
     }
     int remaining = settings_.warm_refine_iterations;
@@ -1155,7 +1155,7 @@ class SolverImpl {
       }
       step_seconds = secondsSince(step_start);
     }
-    if (!reference) b.scatter(active_, s);
+    if (!reference) b.scatter(active_, s, threads_);
   }
 
   /// Majorize-minimize at one level: inner iterations on the tangent plane at

@@ -168,9 +168,10 @@ struct ActiveBuffers {
   /// fresh memory).
   void preallocate(int width, int height, int num_inputs, int active);
   /// Gathers the state at the active pixels (and their links and ghosts);
-  /// n = nbar = n0 there.
+  /// n = nbar = n0 there. The nodes are numbered in one thread, the values
+  /// copied with `threads`.
   void gather(const PreparedLevel& level, const IterationState& state,
-              const ActiveSet& active);
+              const ActiveSet& active, int threads = 1);
   /// node_n <- n / |n| at the active pixels (the candidate of an outer step).
   void normalizeCandidate();
   /// The terms of E that involve an active pixel, at node_n (as
@@ -179,8 +180,9 @@ struct ActiveBuffers {
   /// n0 <- node_n at the active pixels; n = nbar = n0 (a new outer step).
   void acceptCandidate();
   /// Writes n0 (into state.n0) and the duals of the links and data terms
-  /// back.
-  void scatter(const ActiveSet& active, IterationState& state) const;
+  /// back, with `threads`.
+  void scatter(const ActiveSet& active, IterationState& state,
+               int threads = 1) const;
 };
 
 /// runInnerActive() on gathered buffers: the same steps on contiguous
