@@ -525,9 +525,7 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
 
 namespace {
 
-/// Elements per float partial sum of ActiveBuffers::energy() (the blocks are
-/// summed in double).
-constexpr int kEnergyBlock = 256;
+constexpr int kEnergyBlock = ActiveBuffers::kEnergyBlock;
 
 /// Sum over links [m0, m1) of w huber_eps(|n_b - n_a|).
 NF_MULTIVERSION
@@ -570,29 +568,42 @@ float dataEnergyBlock(int k0, int k1, bool squared, const float* __restrict c,
 
 }  // namespace
 
-double ActiveBuffers::energy(double huber_eps, DataPenalty penalty) const {
+double ActiveBuffers::energy(double huber_eps, DataPenalty penalty,
+                             int threads) const {
   const int L = num_inputs, P = num_active;
   const auto& nn = node_n;
-  double total = 0.0;
-  // Smoothness: w huber(|n_b - n_a|) of each link.
-  for (int m0 = 0; m0 < num_links; m0 += kEnergyBlock) {
-    total += linkEnergyBlock(m0, std::min(num_links, m0 + kEnergyBlock),
-                             static_cast<float>(huber_eps), link_a.data(),
-                             link_b.data(), link_w.data(), nn[0].data(),
-                             nn[1].data(), nn[2].data());
-  }
-  // Data terms: sum_l c_l phi(n - f_l) at each active pixel (c = 0 where an
+  // Blocks: the links' smoothness terms w huber(|n_b - n_a|), then each
+  // input's data terms c_l phi(n - f_l) at the active pixels (c = 0 where an
   // input is missing).
-  for (int l = 0; l < L; ++l) {
-    for (int k0 = 0; k0 < P; k0 += kEnergyBlock) {
-      total += dataEnergyBlock(
-          k0, std::min(P, k0 + kEnergyBlock),
-          penalty == DataPenalty::kSquaredL2, c.data() + l * P,
+  const int link_blocks = (num_links + kEnergyBlock - 1) / kEnergyBlock;
+  const int data_blocks = (P + kEnergyBlock - 1) / kEnergyBlock;
+  const int blocks = link_blocks + L * data_blocks;
+  if (block_sums.size() < static_cast<std::size_t>(blocks)) {
+    block_sums.resize(blocks);
+  }
+  const float eps = static_cast<float>(huber_eps);
+  const bool squared = penalty == DataPenalty::kSquaredL2;
+  const int used = P >= kMinActivePerThread ? threads : 1;
+#pragma omp parallel for num_threads(used) schedule(static)
+  for (int b = 0; b < blocks; ++b) {
+    if (b < link_blocks) {
+      const int m0 = b * kEnergyBlock;
+      block_sums[b] =
+          linkEnergyBlock(m0, std::min(num_links, m0 + kEnergyBlock), eps,
+                          link_a.data(), link_b.data(), link_w.data(),
+                          nn[0].data(), nn[1].data(), nn[2].data());
+    } else {
+      const int l = (b - link_blocks) / data_blocks;
+      const int k0 = ((b - link_blocks) % data_blocks) * kEnergyBlock;
+      block_sums[b] = dataEnergyBlock(
+          k0, std::min(P, k0 + kEnergyBlock), squared, c.data() + l * P,
           delta.data() + l * P, nn[0].data(), nn[1].data(), nn[2].data(),
           f.data() + (3 * l) * P, f.data() + (3 * l + 1) * P,
           f.data() + (3 * l + 2) * P);
     }
   }
+  double total = 0.0;
+  for (int b = 0; b < blocks; ++b) total += block_sums[b];
   return total;
 }
 

@@ -196,6 +196,9 @@ void ActiveBuffers::preallocate(int W, int H, int L, int active) {
   growTo(f, 3 * L * P);
   growTo(c, L * P);
   growTo(delta, L * P);
+  // energy()'s partial sums, one per block of terms.
+  growTo(block_sums, (links + kEnergyBlock - 1) / kEnergyBlock +
+                         L * ((P + kEnergyBlock - 1) / kEnergyBlock));
   for (auto& list : pixel_links) growTo(list, P);
 }
 

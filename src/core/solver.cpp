@@ -1085,7 +1085,7 @@ class SolverImpl {
       }
     } else {
       b.gather(level, s, active_, threads_);
-      best = b.energy(settings_.huber_eps, settings_.penalty);
+      best = b.energy(settings_.huber_eps, settings_.penalty, threads_);
     }
     int remaining = settings_.warm_refine_iterations;
     double step_seconds = 0.0;  // what the last outer step took
@@ -1122,7 +1122,7 @@ class SolverImpl {
       } else {
         internal::runInnerActiveFast(level, params, b, k);
         b.normalizeCandidate();
-        e = b.energy(settings_.huber_eps, settings_.penalty);
+        e = b.energy(settings_.huber_eps, settings_.penalty, threads_);
       }
       const bool accepted = e <= best;
       const double decrease = (best - e) / std::max(best, 1e-30);

@@ -159,6 +159,11 @@ struct ActiveBuffers {
   std::vector<float> link_w;            ///< w of each link
   std::array<std::vector<float>, 3> p;  ///< per link
   std::array<std::vector<float>, 3> d;  ///< scratch: div p - sum q
+  /// Terms per float partial sum of energy() (the blocks are summed in
+  /// double).
+  static constexpr int kEnergyBlock = 256;
+  /// scratch of energy(): one partial sum per block of terms
+  mutable std::vector<double> block_sums;
   /// Unit normals of the nodes that E is evaluated at: the candidate n / |n|
   /// (or n0) at the active pixels, n0 at the ghosts.
   std::array<std::vector<float>, 3> node_n;
@@ -175,8 +180,9 @@ struct ActiveBuffers {
   /// node_n <- n / |n| at the active pixels (the candidate of an outer step).
   void normalizeCandidate();
   /// The terms of E that involve an active pixel, at node_n (as
-  /// energyActive()).
-  double energy(double huber_eps, DataPenalty penalty) const;
+  /// energyActive()): blocks of terms summed with `threads`, the blocks'
+  /// sums then added in order (the same result for any thread count).
+  double energy(double huber_eps, DataPenalty penalty, int threads = 1) const;
   /// n0 <- node_n at the active pixels; n = nbar = n0 (a new outer step).
   void acceptCandidate();
   /// Writes n0 (into state.n0) and the duals of the links and data terms
