@@ -518,6 +518,20 @@ internal::PreparedLevel randomLevel(int W, int H, int L, std::uint64_t seed,
   return level;
 }
 
+/// Diagonally preconditioned steps for L data terms (tau = 1 / (4 + L),
+/// sigma = 1/2 for the differences, 1 for the data terms), Huber threshold
+/// 0.05, soft visibility.
+internal::InnerParams preconditionedParams(int L, int threads) {
+  internal::InnerParams params;
+  params.tau = 1.0f / (4.0f + L);
+  params.sigma = 0.5f;
+  params.sigma_data = 1.0f;
+  params.huber_eps = 0.05f;
+  params.soft_visibility = true;
+  params.num_threads = threads;
+  return params;
+}
+
 void initState(const internal::PreparedLevel& level,
                internal::IterationState& s) {
   s.resize(level.width, level.height, level.num_inputs);
@@ -585,13 +599,7 @@ TEST_P(FastMatchesReference, SameIteratesAfterManyIterations) {
 TEST(FastMatchesReferenceDataHuber, SameIteratesAfterManyIterations) {
   for (int L : {1, 2, 3}) {
     const auto level = randomLevel(37, 23, L, 90 + L, /*data_huber=*/true);
-    internal::InnerParams params;
-    params.tau = 1.0f / (4.0f + L);
-    params.sigma = 0.5f;
-    params.sigma_data = 1.0f;
-    params.huber_eps = 0.05f;
-    params.soft_visibility = true;
-    params.num_threads = 2;
+    const internal::InnerParams params = preconditionedParams(L, 2);
     internal::IterationState ref, fast;
     initState(level, ref);
     initState(level, fast);
@@ -620,13 +628,8 @@ TEST(FastMatchesReferenceDataHuber, SameIteratesAfterManyIterations) {
 /// threads with nothing to do in a round).
 TEST(FastPipeline, SameIteratesForAnyThreadsDepthAndCount) {
   const auto level = randomLevel(29, 17, 2, 7, /*data_huber=*/true);
-  internal::InnerParams params;
   // Diagonal preconditioning steps (different dual steps per term).
-  params.tau = 1.0f / 6.0f;
-  params.sigma = 0.5f;
-  params.sigma_data = 1.0f;
-  params.huber_eps = 0.05f;
-  params.soft_visibility = true;
+  internal::InnerParams params = preconditionedParams(2, 1);
   for (int iterations : {1, 5, 13, 40}) {
     internal::IterationState ref;
     initState(level, ref);
@@ -736,13 +739,7 @@ TEST(ActiveSet, DilatesTheSeedsAndListsEachTouchingLinkOnce) {
 TEST(ActiveIterations, AllActiveEqualsTheWholeImageIteration) {
   const int W = 21, H = 13, L = 2;
   const auto level = randomLevel(W, H, L, 61, /*data_huber=*/true);
-  internal::InnerParams params;
-  params.tau = 1.0f / (4.0f + L);
-  params.sigma = 0.5f;
-  params.sigma_data = 1.0f;
-  params.huber_eps = 0.05f;
-  params.soft_visibility = true;
-  params.num_threads = 1;
+  const internal::InnerParams params = preconditionedParams(L, 1);
   internal::ActiveSet active;
   active.build(std::vector<unsigned char>(W * H, 1), W, H, 0);
   ASSERT_EQ(active.pixels.size(), static_cast<std::size_t>(W * H));
@@ -766,14 +763,8 @@ TEST(ActiveIterations, FastMatchesReferenceAndLeavesOtherPixelsAlone) {
   for (int L : {1, 2, 3}) {
     for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
       const auto level = randomLevel(W, H, L, 70 + L, /*data_huber=*/true);
-      internal::InnerParams params;
-      params.tau = 1.0f / (4.0f + L);
-      params.sigma = 0.5f;
-      params.sigma_data = 1.0f;
-      params.huber_eps = 0.05f;
+      internal::InnerParams params = preconditionedParams(L, 2);
       params.penalty = penalty;
-      params.soft_visibility = true;
-      params.num_threads = 2;
       internal::ActiveSet active;
       active.build(randomSeeds(W, H, 0.03, 80 + L), W, H, 1);
       internal::IterationState start, ref, fast;
