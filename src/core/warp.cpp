@@ -148,10 +148,10 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
 }
 
 /// Where a chunk of pixels of one row comes from, and their warped normals:
-/// the arithmetic of PreviousPixel::at(), blendable() and bilinearRotate()
-/// per pixel, without early exits (GCC 12 does not vectorise its gathers:
-/// it runs as fast as the version with early exits, 7.7 ms per warp with
-/// rotated duals at 640x480, 2 threads). Writes n_cur (NaN where no
+/// the arithmetic of PreviousPixel::at() and blendable() per pixel, then
+/// bilinearRotate(), without early exits (GCC 12 does not vectorise its
+/// gathers: it runs as fast as the version with early exits, 7.7 ms per warp
+/// with rotated duals at 640x480, 2 threads). Writes n_cur (NaN where no
 /// prediction) and, per pixel, the source's first corner (-1: none), its
 /// steps to the right and down, and the blend weights.
 void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
@@ -198,18 +198,10 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                        (bx * cx + by * cy + bz * cz >= cos_blend) &
                        (bx * ex + by * ey + bz * ez >= cos_blend) &
                        (cx * ex + cy * ey + cz * ez >= cos_blend);
-    // bilinearRotate(): the blend, rotated into the current frame.
-    const float* src[3] = {n0, n1, n2};
-    float s[3];
-    for (int k = 0; k < 3; ++k) {
-      const float* p = src[k];
-      s[k] = (1 - ty) * ((1 - tx) * p[i00] + tx * p[i00 + dx]) +
-             ty * ((1 - tx) * p[i00 + dy] + tx * p[i00 + dy + dx]);
-    }
+    // The blend, rotated into the current frame.
+    const float* const src[3] = {n0, n1, n2};
     float n[3];
-    for (int r = 0; r < 3; ++r) {
-      n[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
-    }
+    bilinearRotate(src, i00, dx, dy, tx, ty, R, n);
     const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     const bool ok = inside & blend & (len > 1e-6f);
     const float safe_len = ok ? len : 1.0f;
