@@ -568,38 +568,6 @@ void sanitizeWarmRow(int W, float y, const float* Ki, float* __restrict nx,
   }
 }
 
-/// A warm start's normals made usable: normalized, projected onto the visible
-/// set in soft mode; pixels without one (NaN, zero: e.g. uncovered by a
-/// warp) get the cold start and unknown = 1 (W * H entries, resized).
-void sanitizeWarmNormals(const PreparedLevel& level, VisibilityMode mode,
-                         PlanarImage& n, std::vector<unsigned char>& unknown,
-                         int threads) {
-  const int W = level.width;
-  unknown.resize(static_cast<std::size_t>(W) * level.height);
-  const bool soft = mode == VisibilityMode::kSoft;
-  const float Ki[9] = {
-      static_cast<float>(level.K_inv[0]), static_cast<float>(level.K_inv[1]),
-      static_cast<float>(level.K_inv[2]), static_cast<float>(level.K_inv[3]),
-      static_cast<float>(level.K_inv[4]), static_cast<float>(level.K_inv[5]),
-      static_cast<float>(level.K_inv[6]), static_cast<float>(level.K_inv[7]),
-      static_cast<float>(level.K_inv[8])};
-#pragma omp parallel for num_threads(threads) schedule(static)
-  for (int y = 0; y < level.height; ++y) {
-    const std::size_t row = static_cast<std::size_t>(y) * W;
-    (soft ? sanitizeWarmRow<true>
-          : sanitizeWarmRow<false>)(W, static_cast<float>(y), Ki,
-                                    n.plane(0) + row, n.plane(1) + row,
-                                    n.plane(2) + row, unknown.data() + row);
-    // The missing ones start as a cold start would.
-    for (int x = 0; x < W; ++x) {
-      if (unknown[row + x] == 0) continue;
-      float v[3];
-      coldNormal(level, mode, x, y, v);
-      for (int c = 0; c < 3; ++c) n.plane(c)[row + x] = v[c];
-    }
-  }
-}
-
 /// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
 /// normalizes, and projects onto the visible set in soft mode.
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
@@ -667,9 +635,32 @@ void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
 namespace internal {
 
 void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
-                       PlanarImage& normals,
-                       std::vector<unsigned char>& unknown, int threads) {
-  sanitizeWarmNormals(level, mode, normals, unknown, threads);
+                       PlanarImage& n, std::vector<unsigned char>& unknown,
+                       int threads) {
+  const int W = level.width;
+  unknown.resize(static_cast<std::size_t>(W) * level.height);
+  const bool soft = mode == VisibilityMode::kSoft;
+  const float Ki[9] = {
+      static_cast<float>(level.K_inv[0]), static_cast<float>(level.K_inv[1]),
+      static_cast<float>(level.K_inv[2]), static_cast<float>(level.K_inv[3]),
+      static_cast<float>(level.K_inv[4]), static_cast<float>(level.K_inv[5]),
+      static_cast<float>(level.K_inv[6]), static_cast<float>(level.K_inv[7]),
+      static_cast<float>(level.K_inv[8])};
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < level.height; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    (soft ? sanitizeWarmRow<true>
+          : sanitizeWarmRow<false>)(W, static_cast<float>(y), Ki,
+                                    n.plane(0) + row, n.plane(1) + row,
+                                    n.plane(2) + row, unknown.data() + row);
+    // The missing ones start as a cold start would.
+    for (int x = 0; x < W; ++x) {
+      if (unknown[row + x] == 0) continue;
+      float v[3];
+      coldNormal(level, mode, x, y, v);
+      for (int c = 0; c < 3; ++c) n.plane(c)[row + x] = v[c];
+    }
+  }
 }
 
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
@@ -895,8 +886,8 @@ class SolverImpl {
         // Warm start: the previous normals (sanitized) and duals, swapped in
         // rather than copied (same sizes: no allocation either way).
         std::swap(s.n0, out.normals);
-        sanitizeWarmNormals(level, settings_.visibility, s.n0, unknown_,
-                            threads_);
+        internal::sanitizeWarmStart(level, settings_.visibility, s.n0, unknown_,
+                                    threads_);
         std::swap(s.p_h, out.dual_h);
         std::swap(s.p_v, out.dual_v);
         for (int l = 0; l < L; ++l) std::swap(s.q[l], out.dual_data[l]);
@@ -949,10 +940,10 @@ class SolverImpl {
         // still, duals reset or warped: every outer step rejected, E would
         // rise) and, started near the deadline, overran it. Their energies
         // are not measured.
-      } else if (finest_level && use_warm &&
-                 (report.budget_exhausted || !levelFits())) {
-        // The budget went to the local refinement: the whole-image step is
-        // left out (its energies are then not measured).
+      } else if (finest_level && use_warm && !levelFits()) {
+        // A warm start under a time budget without the refinement: what is
+        // left of the budget would not hold a whole-image step, which is left
+        // out (its energies are then not measured).
         report.budget_exhausted = true;
       } else {
         runLevel(level, s, finest_level, report);
