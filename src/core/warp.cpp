@@ -150,10 +150,9 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
 /// Where a chunk of pixels of one row comes from, and their warped normals:
 /// the arithmetic of PreviousPixel::at() and blendable() per pixel, then
 /// bilinearRotate(), without early exits (GCC 12 does not vectorise its
-/// gathers: it runs as fast as the version with early exits, 7.7 ms per warp
-/// with rotated duals at 640x480, 2 threads). Writes n_cur (NaN where no
-/// prediction) and, per pixel, the source's first corner (-1: none), its
-/// steps to the right and down, and the blend weights.
+/// gathers, so it runs scalar). Writes n_cur (NaN where no prediction) and,
+/// per pixel, the source's first corner (-1: none), its steps to the right
+/// and down, and the blend weights.
 void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                       int count, const float* __restrict n0,
                       const float* __restrict n1, const float* __restrict n2,
