@@ -742,6 +742,39 @@ TEST(EdgeWeights, FlatImageGivesOneAndEdgesGiveLess) {
   EXPECT_FLOAT_EQ(computeEdgeWeights(step, settings).at(0, 5, 9), 1.0f);
 }
 
+/// The exponential weights (computed with a float exp) against the double
+/// exp of the same differences: within 2e-7 relative wherever the weight is
+/// above 0.05, the floor everywhere else.
+TEST(EdgeWeights, ExponentialMatchesTheDoubleExp) {
+  const int W = 800, H = 2;
+  ColorImage ramp(W, H, 1, 0.0f);
+  // Differences 0, 0.0005, 0.001, ...: weights from 1 down to the floor.
+  for (int y = 0; y < H; ++y) {
+    float value = 0.0f;
+    for (int x = 0; x < W; ++x) {
+      ramp.at(0, y, x) = value;
+      value += 0.0005f * x;
+    }
+  }
+  EdgeWeightSettings settings;  // exponential, beta 1, forward differences
+  settings.w_min = 0.01;
+  const PlanarImage w = computeEdgeWeights(ramp, settings);
+  int checked = 0, floored = 0;
+  for (int x = 0; x + 1 < W; ++x) {
+    const float g = std::abs(ramp.at(0, 0, x + 1) - ramp.at(0, 0, x));
+    const double expected = std::exp(-settings.alpha * static_cast<double>(g));
+    if (expected >= 0.05) {
+      EXPECT_NEAR(w.at(0, 0, x), expected, 2e-7 * expected) << "g " << g;
+      ++checked;
+    } else if (expected < settings.w_min) {
+      EXPECT_EQ(w.at(0, 0, x), static_cast<float>(settings.w_min));
+      ++floored;
+    }
+  }
+  EXPECT_GT(checked, 100);
+  EXPECT_GT(floored, 100);
+}
+
 TEST(EdgeWeights, ForwardDifferencesMarkExactlyTheLinkAcrossAnEdge) {
   ColorImage step(20, 10, 3, 0.2f);
   for (int y = 0; y < 10; ++y) {
