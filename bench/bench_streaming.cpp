@@ -7,11 +7,14 @@
 // start, refinement) and the worst case. Not a test: timings depend on the
 // machine and its load.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include <sys/resource.h>
 
@@ -59,6 +62,9 @@ int main(int argc, char** argv) {
   // --refine-radius R: the local refinement's dilation (default: the
   // solver's).
   int refine_radius = -1;
+  // --busy-threads N: N threads that spin for the whole run, as other work
+  // on the machine would (the solver gets the cores that are left over).
+  int busy_threads = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -86,6 +92,8 @@ int main(int argc, char** argv) {
       refine = static_cast<int>(value);
     else if (key == "--refine-radius")
       refine_radius = static_cast<int>(value);
+    else if (key == "--busy-threads")
+      busy_threads = static_cast<int>(value);
     else if (key == "--reset-duals")
       reset_duals = value != 0.0 ? 1 : 0;
     else {
@@ -115,19 +123,28 @@ int main(int argc, char** argv) {
       "# streaming: scene %d, %dx%d, 2 inputs, %.2f deg/frame, budget %.1f ms "
       "per frame (warp + solve), "
       "%d inner iterations per frame (0: by the budget), local refinement of "
-      "the warm start %d iterations at most, %d threads%s\n",
+      "the warm start %d iterations at most, %d threads%s, %d busy threads "
+      "beside it\n",
       scene, width, height, still ? 0.0 : degrees_per_frame,
       live.time_budget_ms, iterations, live.warm_refine_iterations, threads,
-      still ? ", camera still" : "");
+      still ? ", camera still" : "", busy_threads);
   std::printf(
       "| frame | frame ms | warp ms | solve ms | prepare ms | warm start ms | "
       "refine ms | whole-image its (outer steps / rejected) | refined px | "
-      "refine its | warm | PSNR live (dB) "
+      "refine its (on one thread) | warm | PSNR live (dB) "
       "| PSNR converged (dB) | deficit (dB) | PSNR warm start (dB) | PSNR "
       "warped ground truth (dB) |\n");
   std::printf(
       "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|---:|"
       "---:|---:|\n");
+  std::atomic<bool> stop_busy{false};
+  std::vector<std::thread> busy;
+  for (int t = 0; t < busy_threads; ++t) {
+    busy.emplace_back([&stop_busy] {
+      volatile double x = 1.0;
+      while (!stop_busy.load(std::memory_order_relaxed)) x = x * 1.0000001;
+    });
+  }
   nf::Solver live_solver(live);
   nf::Solver reference_solver(converged);
   nf::SolverState state, warp_scratch;
@@ -187,17 +204,20 @@ int main(int argc, char** argv) {
     sum_deficit += deficit;
     std::printf(
         "| %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %d (%d / %d) | %d | "
-        "%d | "
+        "%d (%d) | "
         "%s | "
         "%.2f | %.2f | %.3f | %.2f | %.2f |\n",
         k, ms, warp_ms, solve_ms, 1e3 * report.prepare_seconds,
         1e3 * report.warm_start_seconds, 1e3 * report.refine_seconds,
         report.inner_iterations, report.outer_iterations,
         report.rejected_outer_steps, report.refined_pixels,
-        report.refine_iterations, report.warm_started ? "yes" : "no", psnr_live,
-        psnr_best, deficit, psnr_start, psnr_warped_gt);
+        report.refine_iterations, report.refine_single_thread_iterations,
+        report.warm_started ? "yes" : "no", psnr_live, psnr_best, deficit,
+        psnr_start, psnr_warped_gt);
     std::fflush(stdout);
   }
+  stop_busy = true;
+  for (std::thread& t : busy) t.join();
   const double frame_ms = 1000.0 / 30.0;
   std::printf(
       "\nworst frame time (warp + solve) %.1f ms (mean %.1f ms; 30 fps allows "

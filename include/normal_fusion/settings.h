@@ -126,7 +126,10 @@ struct SolverSettings {
   int pyramid_levels = 0;
 
   // Execution.
-  int num_threads = 0;  ///< 0 = all hardware threads
+  /// 0 = all hardware threads. The local refinement of a warm start
+  /// measures its steps and runs on one thread while that is faster (a
+  /// machine whose other work holds a thread back); its results are the same.
+  int num_threads = 0;
   SolverBackend backend = SolverBackend::kFast;
   /// Automatic steps: diagonal preconditioning (tau = 1 / (4 + L), sigma =
   /// 1/2 for the differences and 1 for the data terms) when true, else the

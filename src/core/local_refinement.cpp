@@ -312,6 +312,36 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   }
 }
 
+void RefineThreadChooser::reset(int max_threads) {
+  max_threads_ = std::max(1, max_threads);
+  cost_one_ = cost_all_ = 0.0;
+  steps_since_probe_ = 0;
+}
+
+int RefineThreadChooser::choose() {
+  if (max_threads_ == 1) return 1;
+  // Each count measured once before the costs decide.
+  if (cost_all_ == 0.0) return max_threads_;
+  if (cost_one_ == 0.0) return 1;
+  const int cheaper = cost_one_ < cost_all_ ? 1 : max_threads_;
+  // Every kProbeInterval-th step the other count, so that a change of the
+  // machine's load is noticed.
+  if (++steps_since_probe_ >= kProbeInterval) {
+    steps_since_probe_ = 0;
+    return cheaper == 1 ? max_threads_ : 1;
+  }
+  return cheaper;
+}
+
+void RefineThreadChooser::record(int threads,
+                                 double seconds_per_pixel_iteration) {
+  if (!(seconds_per_pixel_iteration > 0.0) ||
+      !std::isfinite(seconds_per_pixel_iteration)) {
+    return;
+  }
+  (threads == 1 ? cost_one_ : cost_all_) = seconds_per_pixel_iteration;
+}
+
 void ActiveBuffers::normalizeCandidate() {
   for (int k = 0; k < num_active; ++k) {
     const float inv = 1.0f / std::sqrt(n[0][k] * n[0][k] + n[1][k] * n[1][k] +

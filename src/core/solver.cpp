@@ -814,6 +814,8 @@ class SolverImpl {
                         settings_.time_budget_ms));
     has_budget_start_ = false;
     threads_ = resolveThreads(settings_.num_threads);
+    if (refine_threads_.maxThreads() != threads_)
+      refine_threads_.reset(threads_);
 
     // Reset the report but keep its vectors' capacity.
     std::vector<double> energies, energy_seconds;
@@ -999,6 +1001,8 @@ class SolverImpl {
   bool has_deadline_ = false;
   int threads_ = 1;
   int remaining_inner_ = 0;
+  /// The local refinement's thread count per step (kept across frames).
+  internal::RefineThreadChooser refine_threads_;
 
   /// Step sizes for L data terms; throws ParameterError when explicit steps
   /// break tau * sigma * (8 + L) < 1.
@@ -1082,17 +1086,27 @@ class SolverImpl {
     double step_seconds = 0.0;  // what the last outer step took
     while (remaining > 0) {
       const Clock::time_point step_start = Clock::now();
+      const int k = std::min(kRefineStepIterations, remaining);
+      // One thread or all: whichever the last steps found cheaper (the same
+      // result either way).
+      const int step_threads = reference ? threads_ : refine_threads_.choose();
+      // What the step will take: the last step's time, or more if its thread
+      // count was measured to cost more.
+      const double expected_seconds =
+          reference ? step_seconds
+                    : std::max(step_seconds,
+                               refine_threads_.cost(step_threads) * k * count);
       if (has_deadline_ &&
           step_start + std::chrono::duration_cast<Clock::duration>(
                            std::chrono::duration<double>(kBudgetMargin *
-                                                         step_seconds)) >
+                                                         expected_seconds)) >
               deadline_) {
         report.budget_exhausted = true;
         break;
       }
-      const int k = std::min(kRefineStepIterations, remaining);
       remaining -= k;
       report.refine_iterations += k;
+      if (step_threads == 1) report.refine_single_thread_iterations += k;
       // Inner iterations, then the candidate n / |n| at the active pixels and
       // its local terms of E.
       double e = 0.0;
@@ -1111,9 +1125,11 @@ class SolverImpl {
         e = internal::energyActive(level, settings_.huber_eps,
                                    settings_.penalty, s.n, active_, threads_);
       } else {
-        internal::runInnerActiveFast(level, params, b, k);
+        InnerParams step_params = params;
+        step_params.num_threads = step_threads;
+        internal::runInnerActiveFast(level, step_params, b, k);
         b.normalizeCandidate();
-        e = b.energy(settings_.huber_eps, settings_.penalty, threads_);
+        e = b.energy(settings_.huber_eps, settings_.penalty, step_threads);
       }
       const bool accepted = e <= best;
       const double decrease = (best - e) / std::max(best, 1e-30);
@@ -1145,6 +1161,10 @@ class SolverImpl {
         break;
       }
       step_seconds = secondsSince(step_start);
+      if (!reference && count > 0) {
+        refine_threads_.record(step_threads,
+                               step_seconds / (static_cast<double>(k) * count));
+      }
     }
     if (!reference) b.scatter(active_, s, threads_);
   }

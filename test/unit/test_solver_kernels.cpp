@@ -857,6 +857,98 @@ TEST(ActiveEnergy, ChangesAsTheWholeEnergy) {
   }
 }
 
+/// The gathered refinement gives the same bits on 1, 2 and 3 threads, its
+/// energy included: the premise of RefineThreadChooser, which switches the
+/// count between steps. The set is large enough for every thread to work.
+TEST(ActiveIterations, SameBitsForAnyThreadCount) {
+  const int W = 160, H = 120, L = 2;
+  const auto level = randomLevel(W, H, L, 31, /*data_huber=*/true);
+  internal::ActiveSet active;
+  active.build(randomSeeds(W, H, 0.15, 32), W, H, 1);
+  internal::IterationState start;
+  initState(level, start);
+  start.p_h = test::randomImage(W, H, 3, 33, 0.01f);
+  start.p_v = test::randomImage(W, H, 3, 34, 0.01f);
+  std::vector<internal::ActiveBuffers> runs(3);
+  std::vector<double> energies;
+  for (int threads = 1; threads <= 3; ++threads) {
+    internal::ActiveBuffers& b = runs[threads - 1];
+    b.gather(level, start, active, threads);
+    ASSERT_GT(b.num_active, 3 * 4096) << "too small to use every thread";
+    internal::InnerParams params = preconditionedParams(L, threads);
+    // Steps on alternating counts end where steps on one count do.
+    for (int step = 0; step < 4; ++step) {
+      params.num_threads = step % 2 == 0 ? threads : 1;
+      internal::runInnerActiveFast(level, params, b, 5);
+    }
+    b.normalizeCandidate();
+    energies.push_back(b.energy(0.05, DataPenalty::kL2, threads));
+  }
+  for (int t = 1; t < 3; ++t) {
+    EXPECT_EQ(energies[t], energies[0]) << t + 1 << " threads";
+    for (int ch = 0; ch < 3; ++ch) {
+      EXPECT_EQ(runs[t].node_n[ch], runs[0].node_n[ch]) << t + 1 << " threads";
+      EXPECT_EQ(runs[t].p[ch], runs[0].p[ch]) << t + 1 << " threads";
+    }
+    EXPECT_EQ(runs[t].q, runs[0].q) << t + 1 << " threads";
+  }
+  // And the steps did move the pixels.
+  double moved = 0.0;
+  for (int k = 0; k < runs[0].num_active; ++k) {
+    moved = std::max(moved, static_cast<double>(std::abs(runs[0].node_n[0][k] -
+                                                         runs[0].n0[0][k])));
+  }
+  EXPECT_GT(moved, 1e-2);
+}
+
+/// The refinement's thread count: each count measured first, then the
+/// cheaper one, the other re-measured every kProbeInterval steps; a change
+/// of load turns the choice.
+TEST(RefineThreadChooser, RunsTheCheaperCountAndProbesTheOther) {
+  using Chooser = internal::RefineThreadChooser;
+  Chooser chooser;
+  chooser.reset(1);
+  for (int step = 0; step < 20; ++step) EXPECT_EQ(chooser.choose(), 1);
+
+  chooser.reset(2);
+  EXPECT_EQ(chooser.choose(), 2);  // nothing measured: all threads first
+  chooser.record(2, 8e-9);
+  EXPECT_EQ(chooser.choose(), 1);  // then one
+  chooser.record(1, 12e-9);
+  EXPECT_EQ(chooser.cost(1), 12e-9);
+  EXPECT_EQ(chooser.cost(2), 8e-9);
+  // Two threads cheaper: two, and one every kProbeInterval-th step.
+  int ones = 0;
+  for (int step = 0; step < 4 * Chooser::kProbeInterval; ++step) {
+    const int threads = chooser.choose();
+    chooser.record(threads, threads == 1 ? 12e-9 : 8e-9);
+    ones += threads == 1 ? 1 : 0;
+  }
+  EXPECT_EQ(ones, 4);
+  // The machine gets loaded: two threads now cost 20e-9, one still 12e-9.
+  // The next step on two threads measures it, and one thread runs from then
+  // on (two probed every kProbeInterval-th step).
+  int first_one = -1, twos = 0;
+  for (int step = 0; step < 4 * Chooser::kProbeInterval; ++step) {
+    const int threads = chooser.choose();
+    chooser.record(threads, threads == 1 ? 12e-9 : 20e-9);
+    if (threads == 1 && first_one < 0) first_one = step;
+    if (first_one >= 0 && threads == 2) ++twos;
+  }
+  EXPECT_LE(first_one, 1);
+  EXPECT_GE(twos, 3);
+  EXPECT_LE(twos, 4);
+  // Unusable measurements are ignored.
+  chooser.record(1, std::numeric_limits<double>::quiet_NaN());
+  chooser.record(1, 0.0);
+  chooser.record(1, -1.0);
+  int ones_after = 0;
+  for (int step = 0; step < Chooser::kProbeInterval; ++step) {
+    ones_after += chooser.choose() == 1 ? 1 : 0;
+  }
+  EXPECT_EQ(ones_after, Chooser::kProbeInterval - 1);
+}
+
 /// Map edges: the pixels on both sides of a crease, not those next to an
 /// unknown pixel only, and never an unknown one.
 TEST(MarkMapEdges, MarksBothSidesOfACrease) {

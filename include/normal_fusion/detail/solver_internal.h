@@ -191,6 +191,43 @@ struct ActiveBuffers {
                int threads = 1) const;
 };
 
+/// Picks the thread count of the local refinement's steps from their
+/// measured cost. The refinement synchronises its threads twice per
+/// iteration on small sets, so a thread that the operating system (or the
+/// hypervisor) holds back stalls the other at every barrier: on a loaded
+/// machine one thread can be faster than all of them. Its results do not
+/// depend on the count (each pixel and link is computed the same way and the
+/// energy is summed in fixed blocks), so only the time changes.
+///
+/// Keeps the last cost per pixel-iteration measured with one thread and with
+/// all `max_threads`, runs the cheaper, and re-measures the other every
+/// kProbeInterval steps (a count never measured is tried first). Lives in
+/// the solver, across frames.
+class RefineThreadChooser {
+ public:
+  static constexpr int kProbeInterval = 8;
+
+  /// Forgets what was measured (e.g. when the thread count changes).
+  void reset(int max_threads);
+  /// The thread count for the next step.
+  int choose();
+  /// The cost of a step that ran on `threads` threads: its seconds per pixel
+  /// and iteration.
+  void record(int threads, double seconds_per_pixel_iteration);
+  int maxThreads() const { return max_threads_; }
+  /// The last cost per pixel-iteration measured with `threads` threads (1 or
+  /// all), 0 when none was.
+  double cost(int threads) const {
+    return threads == 1 ? cost_one_ : cost_all_;
+  }
+
+ private:
+  int max_threads_ = 1;
+  double cost_one_ = 0.0;  ///< 0: not measured yet
+  double cost_all_ = 0.0;
+  int steps_since_probe_ = 0;
+};
+
 /// runInnerActive() on gathered buffers: the same steps on contiguous
 /// arrays, vectorised, on up to params.num_threads threads.
 void runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
