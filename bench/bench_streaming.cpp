@@ -65,6 +65,9 @@ int main(int argc, char** argv) {
   // --busy-threads N: N threads that spin for the whole run, as other work
   // on the machine would (the solver gets the cores that are left over).
   int busy_threads = 0;
+  // --adaptive-threads 0|1: the local refinement's thread choice
+  // (SolverSettings::adaptive_refine_threads; default on).
+  int adaptive_threads = 1;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -92,6 +95,8 @@ int main(int argc, char** argv) {
       refine = static_cast<int>(value);
     else if (key == "--refine-radius")
       refine_radius = static_cast<int>(value);
+    else if (key == "--adaptive-threads")
+      adaptive_threads = value != 0.0 ? 1 : 0;
     else if (key == "--busy-threads")
       busy_threads = static_cast<int>(value);
     else if (key == "--reset-duals")
@@ -110,6 +115,7 @@ int main(int argc, char** argv) {
   live.max_total_inner_iterations = iterations > 0 ? iterations : 100000;
   if (refine >= 0) live.warm_refine_iterations = refine;
   if (refine_radius >= 0) live.warm_refine_radius = refine_radius;
+  live.adaptive_refine_threads = adaptive_threads == 1;
   // As the node does: with the local refinement, the duals are reset.
   if (reset_duals < 0) reset_duals = live.warm_refine_iterations > 0 ? 1 : 0;
   nf::SolverSettings converged;
@@ -124,10 +130,11 @@ int main(int argc, char** argv) {
       "per frame (warp + solve), "
       "%d inner iterations per frame (0: by the budget), local refinement of "
       "the warm start %d iterations at most, %d threads%s, %d busy threads "
-      "beside it\n",
+      "beside it, adaptive refinement threads %s\n",
       scene, width, height, still ? 0.0 : degrees_per_frame,
       live.time_budget_ms, iterations, live.warm_refine_iterations, threads,
-      still ? ", camera still" : "", busy_threads);
+      still ? ", camera still" : "", busy_threads,
+      adaptive_threads == 1 ? "on" : "off");
   std::printf(
       "| frame | frame ms | warp ms | solve ms | prepare ms | warm start ms | "
       "refine ms | whole-image its (outer steps / rejected) | refined px | "

@@ -126,10 +126,12 @@ struct SolverSettings {
   int pyramid_levels = 0;
 
   // Execution.
-  /// 0 = all hardware threads. The local refinement of a warm start
-  /// measures its steps and runs on one thread while that is faster (a
-  /// machine whose other work holds a thread back); its results are the same.
-  int num_threads = 0;
+  int num_threads = 0;  ///< 0 = all hardware threads
+  /// The local refinement of a warm start measures its steps and runs on one
+  /// thread while that is faster than num_threads (a machine whose other
+  /// work holds a thread back at its frequent barriers). The results are the
+  /// same bits either way; false: always num_threads.
+  bool adaptive_refine_threads = true;
   SolverBackend backend = SolverBackend::kFast;
   /// Automatic steps: diagonal preconditioning (tau = 1 / (4 + L), sigma =
   /// 1/2 for the differences and 1 for the data terms) when true, else the

@@ -1089,7 +1089,9 @@ class SolverImpl {
       const int k = std::min(kRefineStepIterations, remaining);
       // One thread or all: whichever the last steps found cheaper (the same
       // result either way).
-      const int step_threads = reference ? threads_ : refine_threads_.choose();
+      const int step_threads = reference || !settings_.adaptive_refine_threads
+                                   ? threads_
+                                   : refine_threads_.choose();
       // What the step will take: the last step's time, or more if its thread
       // count was measured to cost more.
       const double expected_seconds =

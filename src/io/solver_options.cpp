@@ -107,6 +107,10 @@ const std::map<std::string, Setter>& setters() {
        [](auto& o, auto& v, auto& s) { s.pyramid_levels = parseInt(o, v); }},
       {"--threads",
        [](auto& o, auto& v, auto& s) { s.num_threads = parseInt(o, v); }},
+      {"--adaptive-refine-threads",
+       [](auto& o, auto& v, auto& s) {
+         s.adaptive_refine_threads = parseOnOff(o, v);
+       }},
       {"--backend",
        [](auto& o, auto& v, auto& s) {
          s.backend = parseName(o, v, parseSolverBackend);
@@ -226,6 +230,9 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << "  --tau X, --sigma X    explicit step sizes, 0 = automatic\n"
       << "  --threads N           0 = all hardware threads [" << d.num_threads
       << "]\n"
+      << "  --adaptive-refine-threads on|off  local refinement on one thread "
+         "while measured faster (same result) ["
+      << onOff(d.adaptive_refine_threads) << "]\n"
       << "  --backend B           fast | reference [" << toString(d.backend)
       << "]\n";
 }

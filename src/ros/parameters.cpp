@@ -68,6 +68,7 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.integer("pyramid_levels", solver.pyramid_levels, 0, 12);
   // Execution.
   v.integer("num_threads", solver.num_threads, 0, 1024);
+  v.flag("adaptive_refine_threads", solver.adaptive_refine_threads);
   v.choice("backend", solver.backend, parseSolverBackend);
   v.flag("preconditioning", solver.preconditioning);
   v.real("tau", solver.tau, 0.0, kInf);

@@ -37,6 +37,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::applySolverOption("--pyramid-levels", "3", s);
   cli::applySolverOption("--preconditioning", "off", s);
   cli::applySolverOption("--threads", "1", s);
+  cli::applySolverOption("--adaptive-refine-threads", "off", s);
   cli::applySolverOption("--backend", "reference", s);
   cli::applySolverOption("--tau", "0.1", s);
   cli::applySolverOption("--sigma", "0.2", s);
@@ -65,6 +66,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   EXPECT_EQ(s.pyramid_levels, 3);
   EXPECT_FALSE(s.preconditioning);
   EXPECT_EQ(s.num_threads, 1);
+  EXPECT_FALSE(s.adaptive_refine_threads);
   EXPECT_EQ(s.backend, SolverBackend::kReference);
   EXPECT_EQ(s.tau, 0.1);
   EXPECT_EQ(s.sigma, 0.2);
@@ -74,7 +76,8 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   for (const char* name :
        {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
         "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
-        "--density-power", "--local-radius", "--hole-link-weight"}) {
+        "--density-power", "--local-radius", "--hole-link-weight",
+        "--adaptive-refine-threads"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }
