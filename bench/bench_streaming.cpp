@@ -130,11 +130,13 @@ int main(int argc, char** argv) {
       "per frame (warp + solve), "
       "%d inner iterations per frame (0: by the budget), local refinement of "
       "the warm start %d iterations at most, %d threads%s, %d busy threads "
-      "beside it, adaptive refinement threads %s\n",
+      "beside it, adaptive refinement threads %s, OMP_WAIT_POLICY %s\n",
       scene, width, height, still ? 0.0 : degrees_per_frame,
       live.time_budget_ms, iterations, live.warm_refine_iterations, threads,
       still ? ", camera still" : "", busy_threads,
-      adaptive_threads == 1 ? "on" : "off");
+      adaptive_threads == 1 ? "on" : "off",
+      std::getenv("OMP_WAIT_POLICY") != nullptr ? std::getenv("OMP_WAIT_POLICY")
+                                                : "unset");
   std::printf(
       "| frame | frame ms | warp ms | solve ms | prepare ms | warm start ms | "
       "refine ms | whole-image its (outer steps / rejected) | refined px | "

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdlib>
 #include <sstream>
 
 #include "normal_fusion/errors.h"
@@ -204,9 +205,14 @@ void NormalFusionNodelet::onInit() {
                                                         stats_cb, stats_cb);
   std::string inputs;
   for (const TopicRole& role : roles_) inputs += " " + role.name;
+  // How the solver's threads wait (set before the process starts, e.g. by
+  // the launch files' omp_wait_policy).
+  const char* wait_policy = std::getenv("OMP_WAIT_POLICY");
   NODELET_INFO(
-      "normal_fusion: %d input(s), %s sync; inputs:%s", settings_.num_inputs,
-      settings_.approximate_sync ? "approximate" : "exact", inputs.c_str());
+      "normal_fusion: %d input(s), %s sync; inputs:%s; OMP_WAIT_POLICY %s",
+      settings_.num_inputs,
+      settings_.approximate_sync ? "approximate" : "exact", inputs.c_str(),
+      wait_policy != nullptr && *wait_policy != '\0' ? wait_policy : "unset");
 }
 
 NormalFusionNodelet::Synchronizer::Options NormalFusionNodelet::syncOptions(
