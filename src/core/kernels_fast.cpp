@@ -10,6 +10,7 @@
 #include <thread>
 #include <vector>
 
+#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 
 namespace normal_fusion {
@@ -45,15 +46,7 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
   return {img.plane(0) + offset, img.plane(1) + offset, img.plane(2) + offset};
 }
 
-// Row kernels are compiled for AVX-512 (x86-64-v4), AVX2 and baseline x86-64;
-// the loader picks one at run time (GCC function multiversioning), so the
-// build stays portable.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define NF_MULTIVERSION \
-  __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
-#else
-#define NF_MULTIVERSION
-#endif
+// Row kernels: NF_MULTIVERSION (AVX-512, AVX2 and baseline x86-64 clones).
 
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
 /// direction, with g = next - here given as two row pointers.

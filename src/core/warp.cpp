@@ -7,6 +7,7 @@
 #include <limits>
 #include <vector>
 
+#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/errors.h"
 
 namespace normal_fusion {
@@ -123,14 +124,20 @@ class PreviousPixel {
 
   static double clampNear(double t, double high) {
     constexpr double kSlack = 1e-6;
-    if (t < 0.0 && t > -kSlack) return 0.0;
-    if (t > high && t < high + kSlack) return high;
-    return t;
+    const double low_clamped = (t < 0.0) & (t > -kSlack) ? 0.0 : t;
+    return (t > high) & (t < high + kSlack) ? high : low_clamped;
   }
 
  private:
   double A_[9];
 };
+
+/// Bilinear blend of one component from its four corners (weights tx, ty).
+inline float blendCorners(float p00, float p01, float p10, float p11, float tx,
+                          float ty) {
+  return (1 - ty) * ((1 - tx) * p00 + tx * p01) +
+         ty * ((1 - tx) * p10 + tx * p11);
+}
 
 /// Bilinear blend of 3 planes at the corners i00, i00 + dx | i00 + dy,
 /// i00 + dy + dx (weights tx, ty), rotated by R: out = R blend.
@@ -139,20 +146,25 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
   float s[3];
   for (int c = 0; c < 3; ++c) {
     const float* p = src[c];
-    s[c] = (1 - ty) * ((1 - tx) * p[i00] + tx * p[i00 + dx]) +
-           ty * ((1 - tx) * p[i00 + dy] + tx * p[i00 + dy + dx]);
+    s[c] = blendCorners(p[i00], p[i00 + dx], p[i00 + dy], p[i00 + dy + dx], tx,
+                        ty);
   }
   for (int r = 0; r < 3; ++r) {
     out[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
   }
 }
 
-/// Where a chunk of pixels of one row comes from, and their warped normals:
-/// the arithmetic of PreviousPixel::at() and blendable() per pixel, then
-/// bilinearRotate(), without early exits (GCC 12 does not vectorise its
-/// gathers, so it runs scalar). Writes n_cur (NaN where no prediction) and,
+/// Pixels per chunk of warpNormalsChunk().
+constexpr int kChunk = 64;
+
+/// Where a chunk of at most kChunk pixels of one row comes from, and their
+/// warped normals: PreviousPixel::at() and blendable() per pixel, then
+/// bilinearRotate()'s blend, in three passes without branches that GCC
+/// vectorises (positions; the corners' normals gathered; blend test, blend,
+/// rotation and normalization). Writes n_cur (NaN where no prediction) and,
 /// per pixel, the source's first corner (-1: none), its steps to the right
 /// and down, and the blend weights.
+NF_MULTIVERSION
 void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                       int count, const float* __restrict n0,
                       const float* __restrict n1, const float* __restrict n2,
@@ -162,56 +174,95 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                       int* __restrict step_y, float* __restrict t_x,
                       float* __restrict t_y) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
+  // The corners that carry weight (blendable()) and whether the position is
+  // inside the previous image.
+  int at0[kChunk], at1[kChunk], at2[kChunk], at3[kChunk];
+  double in_flag[kChunk];  // 1: inside the previous image
+  // PreviousPixel::at(), in double; the positions outside replaced by (0, 0)
+  // (safe indices; their prediction is dropped below).
+  double u_safe[kChunk], v_safe[kChunk];
   for (int j = 0; j < count; ++j) {
-    const int x = x_begin + j;
-    // PreviousPixel::at().
+    const double x = x_begin + j;
     const double w = A[6] * x + A[7] * y + A[8];
     const double inv_w = 1.0 / w;
     const double u =
         PreviousPixel::clampNear((A[0] * x + A[1] * y + A[2]) * inv_w, W - 1.0);
     const double v =
         PreviousPixel::clampNear((A[3] * x + A[4] * y + A[5]) * inv_w, H - 1.0);
-    const bool inside =
-        (w > 1e-9) & (u >= 0.0) & (v >= 0.0) & (u <= W - 1.0) & (v <= H - 1.0);
-    // Safe indices everywhere (the outside ones are not used).
-    const double us = inside ? u : 0.0, vs = inside ? v : 0.0;
-    const int x0 = static_cast<int>(us), y0 = static_cast<int>(vs);
+    const bool in = (w > 1e-9) && (u >= 0.0) && (v >= 0.0) && (u <= W - 1.0) &&
+                    (v <= H - 1.0);
+    u_safe[j] = in ? u : 0.0;
+    v_safe[j] = in ? v : 0.0;
+    in_flag[j] = in ? 1.0 : 0.0;
+  }
+  // The corners of the blend, its weights, and the corners that carry
+  // weight (blendable(): weights below 1e-3 do not count).
+  for (int j = 0; j < count; ++j) {
+    const int x0 = static_cast<int>(u_safe[j]),
+              y0 = static_cast<int>(v_safe[j]);
     const int dx = x0 + 1 < W ? 1 : 0, dy = y0 + 1 < H ? W : 0;
-    const float tx = static_cast<float>(us - x0);
-    const float ty = static_cast<float>(vs - y0);
+    const float tx = static_cast<float>(u_safe[j] - x0);
+    const float ty = static_cast<float>(v_safe[j] - y0);
     const int i00 = y0 * W + x0;
-    // blendable(): the corners that carry weight, all pairs within
-    // kMaxBlendDegrees (NaN fails).
     const int lo_x = tx > 0.999f ? dx : 0, hi_x = tx > 1e-3f ? dx : 0;
     const int lo_y = ty > 0.999f ? dy : 0, hi_y = ty > 1e-3f ? dy : 0;
-    const int at[4] = {i00 + lo_y + lo_x, i00 + lo_y + hi_x, i00 + hi_y + lo_x,
-                       i00 + hi_y + hi_x};
-    // The four corners that carry weight (some may coincide).
-    const float ax = n0[at[0]], ay = n1[at[0]], az = n2[at[0]];
-    const float bx = n0[at[1]], by = n1[at[1]], bz = n2[at[1]];
-    const float cx = n0[at[2]], cy = n1[at[2]], cz = n2[at[2]];
-    const float ex = n0[at[3]], ey = n1[at[3]], ez = n2[at[3]];
-    const bool blend = (ax * bx + ay * by + az * bz >= cos_blend) &
-                       (ax * cx + ay * cy + az * cz >= cos_blend) &
-                       (ax * ex + ay * ey + az * ez >= cos_blend) &
-                       (bx * cx + by * cy + bz * cz >= cos_blend) &
-                       (bx * ex + by * ey + bz * ez >= cos_blend) &
-                       (cx * ex + cy * ey + cz * ez >= cos_blend);
-    // The blend, rotated into the current frame.
-    const float* const src[3] = {n0, n1, n2};
-    float n[3];
-    bilinearRotate(src, i00, dx, dy, tx, ty, R, n);
-    const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    const bool ok = inside & blend & (len > 1e-6f);
-    const float safe_len = ok ? len : 1.0f;
-    out0[j] = ok ? n[0] / safe_len : nan;
-    out1[j] = ok ? n[1] / safe_len : nan;
-    out2[j] = ok ? n[2] / safe_len : nan;
-    corner[j] = ok ? i00 : -1;
+    at0[j] = i00 + lo_y + lo_x;
+    at1[j] = i00 + lo_y + hi_x;
+    at2[j] = i00 + hi_y + lo_x;
+    at3[j] = i00 + hi_y + hi_x;
+    corner[j] = i00;
     step_x[j] = dx;
     step_y[j] = dy;
     t_x[j] = tx;
     t_y[j] = ty;
+  }
+  // The normals at the weight-carrying corners (a, b, c, e) and at the four
+  // corners of the blend (p00, p01, p10, p11), gathered.
+  float a[3][kChunk], b[3][kChunk], c[3][kChunk], e[3][kChunk];
+  float p00[3][kChunk], p01[3][kChunk], p10[3][kChunk], p11[3][kChunk];
+  const float* const src[3] = {n0, n1, n2};
+  for (int ch = 0; ch < 3; ++ch) {
+    const float* __restrict p = src[ch];
+    for (int j = 0; j < count; ++j) {
+      a[ch][j] = p[at0[j]];
+      b[ch][j] = p[at1[j]];
+      c[ch][j] = p[at2[j]];
+      e[ch][j] = p[at3[j]];
+    }
+    for (int j = 0; j < count; ++j) {
+      const int i00 = corner[j];
+      p00[ch][j] = p[i00];
+      p01[ch][j] = p[i00 + step_x[j]];
+      p10[ch][j] = p[i00 + step_y[j]];
+      p11[ch][j] = p[i00 + step_y[j] + step_x[j]];
+    }
+  }
+  for (int j = 0; j < count; ++j) {
+    // blendable(): all pairs of weight-carrying corners within
+    // kMaxBlendDegrees (NaN fails).
+    auto dot = [&](const float(&p)[3][kChunk], const float(&q)[3][kChunk]) {
+      return p[0][j] * q[0][j] + p[1][j] * q[1][j] + p[2][j] * q[2][j];
+    };
+    const bool blend = (dot(a, b) >= cos_blend) & (dot(a, c) >= cos_blend) &
+                       (dot(a, e) >= cos_blend) & (dot(b, c) >= cos_blend) &
+                       (dot(b, e) >= cos_blend) & (dot(c, e) >= cos_blend);
+    // The blend (bilinearRotate()), rotated into the current frame.
+    float s[3];
+    for (int ch = 0; ch < 3; ++ch) {
+      s[ch] = blendCorners(p00[ch][j], p01[ch][j], p10[ch][j], p11[ch][j],
+                           t_x[j], t_y[j]);
+    }
+    float n[3];
+    for (int r = 0; r < 3; ++r) {
+      n[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
+    }
+    const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const bool ok = (in_flag[j] != 0.0) & blend & (len > 1e-6f);
+    const float safe_len = ok ? len : 1.0f;
+    out0[j] = ok ? n[0] / safe_len : nan;
+    out1[j] = ok ? n[1] / safe_len : nan;
+    out2[j] = ok ? n[2] / safe_len : nan;
+    corner[j] = ok ? corner[j] : -1;
   }
 }
 
@@ -259,7 +310,6 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                      scratch.normals.plane(2)};
   // Rows in chunks of kChunk pixels: the chunk's source positions and the
   // warped normals first, then each dual group over the chunk.
-  constexpr int kChunk = 64;
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     for (int x_begin = 0; x_begin < W; x_begin += kChunk) {
