@@ -6,6 +6,7 @@
 #include <cstring>
 #include <vector>
 
+#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/solver.h"
@@ -114,6 +115,7 @@ void differenceMagnitudeMax(const float* img, float* mag_h, float* mag_v, int W,
 /// (exp < 1.7e-38) is clamped there. Relative error below 2e-7 against the
 /// double exp of the same g while exp(t) >= 0.05 (below, the float product
 /// scale g carries more rounding; the weights are floored at w_min there).
+NF_MULTIVERSION
 void exponentialWeightRow(int W, float scale, float w_min,
                           float* __restrict g) {
   constexpr float kLog2e = 1.44269504088896341f;

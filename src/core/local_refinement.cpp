@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 
+#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 
 namespace normal_fusion {
@@ -605,6 +606,7 @@ namespace {
 /// edge[i + k] for k < count: pixel i + k is known (u == 0) and one of its
 /// neighbours left + k, right + k, up + k, down + k is not unknown (u != 1)
 /// and more than acos(min_cos) away. Branch-free (vectorised).
+NF_MULTIVERSION
 void mapEdgesRow(int count, float min_cos, const float* __restrict nx,
                  const float* __restrict ny, const float* __restrict nz,
                  const unsigned char* __restrict u, int i, int left, int right,

@@ -11,6 +11,7 @@
 #include <limits>
 #include <sstream>
 
+#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/errors.h"
 
@@ -69,12 +70,11 @@ namespace {
 /// f = 0, c = 0 elsewhere. Branch-free (vectorised); `confidence` is read
 /// only with kHasConfidence.
 template <bool kHasConfidence>
-void convertInputRow(int W, const float* M_in, float weight,
-                     const float* __restrict nx, const float* __restrict ny,
-                     const float* __restrict nz,
-                     const float* __restrict confidence, float* __restrict fx,
-                     float* __restrict fy, float* __restrict fz,
-                     float* __restrict c) {
+NF_MULTIVERSION void convertInputRow(
+    int W, const float* M_in, float weight, const float* __restrict nx,
+    const float* __restrict ny, const float* __restrict nz,
+    const float* __restrict confidence, float* __restrict fx,
+    float* __restrict fy, float* __restrict fz, float* __restrict c) {
   const float M[9] = {M_in[0], M_in[1], M_in[2], M_in[3], M_in[4],
                       M_in[5], M_in[6], M_in[7], M_in[8]};
   for (int x = 0; x < W; ++x) {
@@ -239,6 +239,7 @@ void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
 namespace {
 
 /// Adds one row of f (3 planes) and its validity (f != 0) to the column sums.
+NF_MULTIVERSION
 void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
                 const float* __restrict fz, float* __restrict sx,
                 float* __restrict sy, float* __restrict sz,
@@ -253,6 +254,7 @@ void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
 }
 
 /// out(x) = sum of in(u), u = x - r .. x + r inside the row.
+NF_MULTIVERSION
 void windowSums(int W, int r, const float* __restrict in,
                 float* __restrict out) {
   auto border = [&](int x) {
@@ -275,6 +277,7 @@ void windowSums(int W, int r, const float* __restrict in,
 /// The thresholds delta, the density ratios and the spreads (-1 below 2
 /// samples) of one row from its window sums (resultant s, valid count n) and
 /// the window's row count. Branch-free (vectorised).
+NF_MULTIVERSION
 void localStatisticsRow(int W, int r, int rows, float eps_global,
                         float eps_local, const float* __restrict sx,
                         const float* __restrict sy, const float* __restrict sz,
@@ -305,6 +308,7 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
 
 /// One row of the window means m = s / |s| of a resultant s (0 where |s| is
 /// tiny) and the spread (-1 there). Branch-free (vectorised).
+NF_MULTIVERSION
 void meanSpreadRow(int W, const float* __restrict sx,
                    const float* __restrict sy, const float* __restrict sz,
                    const float* __restrict spread, float* __restrict mx,
@@ -528,9 +532,10 @@ void initializeCold(const PreparedLevel& level, VisibilityMode mode,
 /// (projectVisible(), with the ray K^-1 (x, y, 1) in float); missing[x] = 1
 /// where |n| is zero, tiny or not finite (n is then left for coldNormal()).
 template <bool kSoft>
-void sanitizeWarmRow(int W, float y, const float* Ki, float* __restrict nx,
-                     float* __restrict ny, float* __restrict nz,
-                     unsigned char* __restrict missing) {
+NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
+                                     float* __restrict nx, float* __restrict ny,
+                                     float* __restrict nz,
+                                     unsigned char* __restrict missing) {
   const float ry0 = Ki[1] * y + Ki[2], ry1 = Ki[4] * y + Ki[5],
               ry2 = Ki[7] * y + Ki[8];
   for (int x = 0; x < W; ++x) {
