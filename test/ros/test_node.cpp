@@ -7,10 +7,15 @@
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <normal_fusion/FusionStats.h>
+#include <ros/master.h>
+#include <ros/network.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <xmlrpcpp/XmlRpc.h>
 
+#include <cstdint>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <mutex>
@@ -245,6 +250,37 @@ TEST(Node, AnswersEverySetWithItsStampAndBeatsTheInputs) {
     EXPECT_GT(p_fused, nf::psnr(f.from_depth, f.frame.normals_gt))
         << "frame " << k;
   }
+}
+
+/// The process that runs the node (~process_node: the nodelet manager, or
+/// the standalone node) has the launch file's OMP_WAIT_POLICY, passive by
+/// default: its pid from the node's XML-RPC API, its environment from /proc.
+TEST(Node, RunsWithTheLaunchFilesWaitPolicy) {
+  if (compareMode()) GTEST_SKIP();
+  std::string process_node;
+  ASSERT_TRUE(ros::NodeHandle("~").getParam("process_node", process_node));
+  XmlRpc::XmlRpcValue args, result, payload;
+  args[0] = ros::this_node::getName();
+  args[1] = process_node;
+  ASSERT_TRUE(ros::master::execute("lookupNode", args, result, payload, true))
+      << process_node;
+  std::string host, uri = static_cast<std::string>(payload);
+  std::uint32_t port = 0;
+  ASSERT_TRUE(ros::network::splitURI(uri, host, port)) << uri;
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue pid_args, pid_result;
+  pid_args[0] = ros::this_node::getName();
+  ASSERT_TRUE(client.execute("getPid", pid_args, pid_result)) << uri;
+  ASSERT_EQ(static_cast<int>(pid_result[0]), 1) << uri;
+  const int pid = static_cast<int>(pid_result[2]);
+  std::ifstream environ("/proc/" + std::to_string(pid) + "/environ",
+                        std::ios::binary);
+  ASSERT_TRUE(environ.good()) << pid;
+  std::string entry, policy = "(not set)";
+  while (std::getline(environ, entry, '\0')) {
+    if (entry.rfind("OMP_WAIT_POLICY=", 0) == 0) policy = entry.substr(16);
+  }
+  EXPECT_EQ(policy, "passive") << process_node << " (pid " << pid << ")";
 }
 
 TEST(Node, PublishesDiagnostics) {
