@@ -400,15 +400,42 @@ void linkDualsIndexed(int num_links, float sigma, float sigma_eps,
   }
 }
 
-/// d = div p at each active pixel: p_right - p_left + p_below - p_above (the
-/// dummy link, p = 0, where a link is missing).
+/// linkDualsIndexed() for links whose first nodes are consecutive (their
+/// components given from the first link's node on: ax[m] = nx[a[m]]).
 NF_MULTIVERSION
-void divergenceIndexed(int count, const int* __restrict right,
-                       const int* __restrict left, const int* __restrict below,
-                       const int* __restrict above, const float* __restrict p,
-                       float* __restrict d) {
+void linkDualsFirstContiguous(
+    int num_links, float sigma, float sigma_eps, const int* __restrict b,
+    const float* __restrict w, const float* __restrict ax_,
+    const float* __restrict ay_, const float* __restrict az_,
+    const float* __restrict nx, const float* __restrict ny,
+    const float* __restrict nz, float* __restrict px, float* __restrict py,
+    float* __restrict pz) {
+  for (int m = 0; m < num_links; ++m) {
+    const float shrink =
+        sigma_eps == 0.0f ? 1.0f : w[m] / (w[m] + sigma_eps + kTiny);
+    const float ax = (px[m] + sigma * (nx[b[m]] - ax_[m])) * shrink;
+    const float ay = (py[m] + sigma * (ny[b[m]] - ay_[m])) * shrink;
+    const float az = (pz[m] + sigma * (nz[b[m]] - az_[m])) * shrink;
+    const float sc = clampScale(ax * ax + ay * ay + az * az, w[m]);
+    px[m] = ax * sc;
+    py[m] = ay * sc;
+    pz[m] = az * sc;
+  }
+}
+
+/// d = div p at each active pixel: p_right - p_left + p_below - p_above, the
+/// right and lower links given contiguously (link k and link P + k of
+/// active pixel k), the left and upper ones by index (the dummy link, p = 0,
+/// where a link is missing).
+NF_MULTIVERSION
+void divergenceRightBelowContiguous(int count, const float* __restrict right,
+                                    const float* __restrict below,
+                                    const int* __restrict left,
+                                    const int* __restrict above,
+                                    const float* __restrict p,
+                                    float* __restrict d) {
   for (int k = 0; k < count; ++k) {
-    d[k] = (p[right[k]] - p[left[k]]) + (p[below[k]] - p[above[k]]);
+    d[k] = (right[k] - p[left[k]]) + (below[k] - p[above[k]]);
   }
 }
 
@@ -464,10 +491,28 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
     for (int it = 0; it < iterations; ++it) {
       // Dual ascent on the smoothness terms of each link: p <- prox(p +
       // sigma (nbar_b - nbar_a)).
-      linkDualsIndexed(m1 - m0, prm.sigma, sigma_eps, b.link_a.data() + m0,
-                       b.link_b.data() + m0, b.link_w.data() + m0, nb[0].data(),
-                       nb[1].data(), nb[2].data(), b.p[0].data() + m0,
-                       b.p[1].data() + m0, b.p[2].data() + m0);
+      // Links [0, P) (right) and [P, 2 P) (below) start at node m and m - P:
+      // read contiguously; the ghosts' links by index.
+      for (int range = 0; range < 3; ++range) {
+        const int begin = std::max(m0, range * P);
+        const int end = std::min(m1, range < 2 ? (range + 1) * P : b.num_links);
+        if (begin >= end) continue;
+        if (range < 2) {
+          const int first_node = begin - range * P;
+          linkDualsFirstContiguous(
+              end - begin, prm.sigma, sigma_eps, b.link_b.data() + begin,
+              b.link_w.data() + begin, nb[0].data() + first_node,
+              nb[1].data() + first_node, nb[2].data() + first_node,
+              nb[0].data(), nb[1].data(), nb[2].data(), b.p[0].data() + begin,
+              b.p[1].data() + begin, b.p[2].data() + begin);
+        } else {
+          linkDualsIndexed(end - begin, prm.sigma, sigma_eps,
+                           b.link_a.data() + begin, b.link_b.data() + begin,
+                           b.link_w.data() + begin, nb[0].data(), nb[1].data(),
+                           nb[2].data(), b.p[0].data() + begin,
+                           b.p[1].data() + begin, b.p[2].data() + begin);
+        }
+      }
 #pragma omp barrier
       // Dual ascent on each data term at the active pixels (nodes [0, P)):
       // q_l <- prox(q_l + sigma (nbar - f_l)).
@@ -495,9 +540,9 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
       }
       // d = div p - sum_l q_l.
       for (int ch = 0; ch < 3; ++ch) {
-        divergenceIndexed(
-            np, b.pixel_links[0].data() + k0, b.pixel_links[1].data() + k0,
-            b.pixel_links[2].data() + k0, b.pixel_links[3].data() + k0,
+        divergenceRightBelowContiguous(
+            np, b.p[ch].data() + k0, b.p[ch].data() + P + k0,
+            b.pixel_links[1].data() + k0, b.pixel_links[3].data() + k0,
             b.p[ch].data(), b.d[ch].data() + k0);
         for (int l = 0; l < L; ++l) {
           subtractRow(np, b.q.data() + (3 * l + ch) * P + k0,

@@ -181,11 +181,12 @@ void growTo(std::vector<T>& v, std::size_t n) {
 void ActiveBuffers::preallocate(int W, int H, int L, int active) {
   const std::size_t N = static_cast<std::size_t>(W) * H;
   const std::size_t P = static_cast<std::size_t>(active);
-  // About 2 links and 1.5 nodes per active pixel (ghosts included).
-  const std::size_t links = 2 * P + 1, nodes = 2 * P;
+  // About 2.5 links (the dummies included) and 1.5 nodes per active pixel
+  // (ghosts included).
+  const std::size_t links = 3 * P + 1, nodes = 2 * P;
   if (node_of.size() != N) node_of.assign(N, -1);
   node_pixel.reserve(nodes);
-  for (auto* v : {&link_a, &link_b}) growTo(*v, links);
+  for (auto* v : {&link_a, &link_b, &link_pixel}) growTo(*v, links);
   growTo(link_w, links);
   for (auto& component : p) growTo(component, links);
   for (int ch = 0; ch < 3; ++ch) {
@@ -226,22 +227,43 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
     }
     return node_of[i];
   };
-  num_links_h = static_cast<int>(active.links_h.size());
-  num_links = num_links_h + static_cast<int>(active.links_v.size());
+  // Links: the link to the right of active pixel k is link k, the one below
+  // it link P + k (a dummy with a = b = k and w = 0 where the image ends),
+  // then the horizontal and the vertical links whose first (left, upper)
+  // pixel is a ghost. So a link's first node is contiguous for 2 P of them,
+  // and so are the right and lower links of the active pixels.
+  num_ghost_links_h = 0;
+  int num_ghost_links_v = 0;
+  for (int i : active.links_h) num_ghost_links_h += active.mask[i] == 0;
+  for (int i : active.links_v) num_ghost_links_v += active.mask[i] == 0;
+  num_links = 2 * P + num_ghost_links_h + num_ghost_links_v;
   const std::size_t links = static_cast<std::size_t>(num_links) + 1;
   growTo(link_a, links);
   growTo(link_b, links);
   growTo(link_w, links);
+  growTo(link_pixel, links);
   for (auto& component : p) growTo(component, links);
-  // The left (upper) pixel of link m.
-  auto link_pixel = [&](int m) {
-    return m < num_links_h ? active.links_h[m]
-                           : active.links_v[m - num_links_h];
-  };
-  for (int m = 0; m < num_links; ++m) {
-    const int i = link_pixel(m);
+  for (int k = 0; k < P; ++k) {
+    const int i = active.pixels[k];
+    const bool has_right = i % W + 1 < W, has_below = i / W + 1 < H;
+    link_a[k] = link_a[P + k] = k;
+    link_b[k] = has_right ? node(i + 1) : k;
+    link_pixel[k] = has_right ? i : -1;
+    link_b[P + k] = has_below ? node(i + W) : k;
+    link_pixel[P + k] = has_below ? i : -1;
+  }
+  int m = 2 * P;
+  for (int i : active.links_h) {
+    if (active.mask[i] != 0) continue;
     link_a[m] = node(i);
-    link_b[m] = node(m < num_links_h ? i + 1 : i + W);
+    link_b[m] = node(i + 1);
+    link_pixel[m++] = i;
+  }
+  for (int i : active.links_v) {
+    if (active.mask[i] != 0) continue;
+    link_a[m] = node(i);
+    link_b[m] = node(i + W);
+    link_pixel[m++] = i;
   }
   // The dummy link: no force.
   link_a[num_links] = link_b[num_links] = 0;
@@ -266,8 +288,13 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   {
 #pragma omp for schedule(static) nowait
     for (int m = 0; m < num_links; ++m) {
-      const bool horizontal = m < num_links_h;
-      const int i = link_pixel(m);
+      const int i = link_pixel[m];
+      if (i < 0) {  // a dummy: no force
+        link_w[m] = 0.0f;
+        for (int ch = 0; ch < 3; ++ch) p[ch][m] = 0.0f;
+        continue;
+      }
+      const bool horizontal = isHorizontal(m);
       const PlanarImage& dual = horizontal ? s.p_h : s.p_v;
       link_w[m] = level.edge_weight.plane(horizontal ? 0 : 1)[i];
       for (int ch = 0; ch < 3; ++ch) p[ch][m] = dual.plane(ch)[i];
@@ -304,7 +331,8 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
     // the same one).
 #pragma omp for schedule(static) nowait
     for (int m = 0; m < num_links; ++m) {
-      const int side = m < num_links_h ? 0 : 2;
+      if (link_pixel[m] < 0) continue;  // dummies stay out
+      const int side = isHorizontal(m) ? 0 : 2;
       if (link_a[m] < P) pixel_links[side][link_a[m]] = m;
       if (link_b[m] < P) pixel_links[side + 1][link_b[m]] = m;
     }
@@ -359,8 +387,7 @@ void ActiveBuffers::acceptCandidate() {
   }
 }
 
-void ActiveBuffers::scatter(const ActiveSet& active, IterationState& s,
-                            int threads) const {
+void ActiveBuffers::scatter(IterationState& s, int threads) const {
   const int L = num_inputs, P = num_active;
 #pragma omp parallel num_threads(threads)
   {
@@ -376,10 +403,9 @@ void ActiveBuffers::scatter(const ActiveSet& active, IterationState& s,
     }
 #pragma omp for schedule(static)
     for (int m = 0; m < num_links; ++m) {
-      const bool horizontal = m < num_links_h;
-      const int i =
-          horizontal ? active.links_h[m] : active.links_v[m - num_links_h];
-      PlanarImage& dual = horizontal ? s.p_h : s.p_v;
+      const int i = link_pixel[m];
+      if (i < 0) continue;  // a dummy
+      PlanarImage& dual = isHorizontal(m) ? s.p_h : s.p_v;
       for (int ch = 0; ch < 3; ++ch) dual.plane(ch)[i] = p[ch][m];
     }
   }

@@ -1173,7 +1173,7 @@ class SolverImpl {
                                step_seconds / (static_cast<double>(k) * count));
       }
     }
-    if (!reference) b.scatter(active_, s, threads_);
+    if (!reference) b.scatter(s, threads_);
   }
 
   /// Majorize-minimize at one level: inner iterations on the tangent plane at

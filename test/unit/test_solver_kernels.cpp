@@ -778,7 +778,7 @@ TEST(ActiveIterations, FastMatchesReferenceAndLeavesOtherPixelsAlone) {
       internal::ActiveBuffers buffers;
       buffers.gather(level, fast, active);
       internal::runInnerActiveFast(level, params, buffers, 50);
-      buffers.scatter(active, fast);
+      buffers.scatter(fast);
       double n_diff = 0.0;
       for (int k = 0; k < buffers.num_active; ++k) {
         const int i = active.pixels[k];

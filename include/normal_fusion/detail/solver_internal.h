@@ -144,8 +144,16 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
 struct ActiveBuffers {
   int num_inputs = 0;
   int num_active = 0;  ///< P
-  int num_links = 0;   ///< links [0, num_links_h) horizontal, then vertical
-  int num_links_h = 0;
+  /// Links: [0, P) the link to the right of each active pixel, [P, 2 P)
+  /// the one below it (dummies where the image ends), then the
+  /// num_ghost_links_h horizontal and then the vertical links whose first
+  /// (left, upper) node is a ghost.
+  int num_links = 0;
+  int num_ghost_links_h = 0;
+  bool isHorizontal(int m) const {
+    return m < num_active ||
+           (m >= 2 * num_active && m < 2 * num_active + num_ghost_links_h);
+  }
   std::vector<int> node_pixel;  ///< pixel of each node (active, then ghosts)
   std::vector<int> node_of;     ///< W * H: node of each pixel, -1 if none
   std::array<std::vector<float>, 3> nbar;        ///< per node (ghosts: n0)
@@ -155,8 +163,9 @@ struct ActiveBuffers {
   /// Links of each active pixel: to the right, left, below, above (the dummy
   /// where there is none).
   std::array<std::vector<int>, 4> pixel_links;
-  std::vector<int> link_a, link_b;      ///< nodes of each link (p of a -> b)
-  std::vector<float> link_w;            ///< w of each link
+  std::vector<int> link_a, link_b;  ///< nodes of each link (p of a -> b)
+  std::vector<int> link_pixel;  ///< pixel of node a of each link, -1: a dummy
+  std::vector<float> link_w;    ///< w of each link
   std::array<std::vector<float>, 3> p;  ///< per link
   std::array<std::vector<float>, 3> d;  ///< scratch: div p - sum q
   /// Terms per float partial sum of energy() (the blocks are summed in
@@ -187,8 +196,7 @@ struct ActiveBuffers {
   void acceptCandidate();
   /// Writes n0 (into state.n0) and the duals of the links and data terms
   /// back, with `threads`.
-  void scatter(const ActiveSet& active, IterationState& state,
-               int threads = 1) const;
+  void scatter(IterationState& state, int threads = 1) const;
 };
 
 /// Picks the thread count of the local refinement's steps from their
