@@ -55,8 +55,8 @@ struct SolveReport {
   int edge_pixels = 0;        ///< warm-start pixels at an edge of the warm map
   int refined_pixels = 0;     ///< pixels of the warm start's local refinement
   int refine_iterations = 0;  ///< its inner iterations (on those pixels only)
-  /// Of these, the ones run on one thread because one was measured to be
-  /// faster than all (a loaded machine; see num_threads).
+  /// Of these, the ones run on one thread instead of num_threads because
+  /// one was measured to be faster (SolverSettings::adaptive_refine_threads).
   int refine_single_thread_iterations = 0;
   /// E at the finest level: start, then each accepted outer step. Empty
   /// (and initial_energy, final_energy NaN) when the whole-image step was

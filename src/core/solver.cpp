@@ -1113,7 +1113,9 @@ class SolverImpl {
       }
       remaining -= k;
       report.refine_iterations += k;
-      if (step_threads == 1) report.refine_single_thread_iterations += k;
+      if (step_threads < threads_) {
+        report.refine_single_thread_iterations += k;
+      }
       // Inner iterations, then the candidate n / |n| at the active pixels and
       // its local terms of E.
       double e = 0.0;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
@@ -346,6 +347,58 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
   EXPECT_LT(test::meanSquaredError(refined, oracle), 1e-8);
   EXPECT_EQ(reference.refined_pixels, with.refined_pixels);
   expectUnit(refined);
+}
+
+/// The local refinement on one thread or two per step
+/// (adaptive_refine_threads) gives the same bits as always two: the choice
+/// changes only the time. The set is large enough for two threads, and the
+/// chooser's second step always runs on one (each count measured once).
+TEST(Solver, AdaptiveRefineThreadsGiveTheSameBits) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(160, 120, 0.5, &gt);
+  NormalInput second;
+  second.normals = test::noisy(gt, 0.3, 12);
+  problem.inputs.push_back(second);
+  SolverState converged;
+  Solver(convergedSettings()).solve(problem, converged, false);
+  SolverState holed = converged;
+  for (int y = 0; y < 120; ++y) {
+    for (int x = 40; x < 80; ++x) {
+      for (int c = 0; c < 3; ++c) holed.normals.at(c, y, x) = kNaN;
+    }
+  }
+  std::vector<NormalMap> results[2];
+  int single_thread_iterations[2] = {0, 0};
+  for (int adaptive = 0; adaptive < 2; ++adaptive) {
+    SolverSettings live;
+    live.num_threads = 2;
+    live.max_total_inner_iterations = 1;
+    live.warm_refine_iterations = 100;
+    live.adaptive_refine_threads = adaptive == 1;
+    Solver solver(live);
+    // Two frames with the same solver: the second starts with both counts
+    // measured.
+    for (int frame = 0; frame < 2; ++frame) {
+      SolverState state = holed;
+      const SolveReport report = solver.solve(problem, state, true);
+      ASSERT_GT(report.refined_pixels, 4096);
+      EXPECT_EQ(report.refine_iterations, 100);
+      single_thread_iterations[adaptive] +=
+          report.refine_single_thread_iterations;
+      results[adaptive].push_back(state.normals);
+    }
+  }
+  EXPECT_EQ(single_thread_iterations[0], 0);
+  EXPECT_GT(single_thread_iterations[1], 0);
+  for (int frame = 0; frame < 2; ++frame) {
+    for (int c = 0; c < 3; ++c) {
+      const float* a = results[0][frame].plane(c);
+      const float* b = results[1][frame].plane(c);
+      for (std::size_t i = 0; i < results[0][frame].pixelCount(); ++i) {
+        ASSERT_EQ(a[i], b[i]) << "frame " << frame << " pixel " << i;
+      }
+    }
+  }
 }
 
 /// New content that the warp cannot know of (a patch whose normals turned
