@@ -539,37 +539,46 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
-                       std::vector<unsigned char>& filled, int threads) {
+                       std::vector<unsigned char>& filled,
+                       std::vector<int>& pending, int threads) {
   const int W = level.width, H = level.height;
-  const long count = static_cast<long>(active.pixels.size());
-  filled.assign(known.size(), 0);
+  // The unknown pixels, in ascending order; each pass visits only those left.
+  pending.clear();
+  for (int i : active.pixels) {
+    if (known[i] == 0) pending.push_back(i);
+  }
+  if (filled.size() < pending.size()) filled.resize(pending.size());
   // Pass by pass inwards from the known pixels: an unknown pixel with a known
   // 4-neighbour (known before this pass) takes its best candidate. Within a
   // pass, pixels read only known ones and write only themselves (in
   // parallel); they become known after it.
-  for (int pass = 0; pass < max_passes; ++pass) {
-    long left = 0, filled_now = 0;
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(+ : left, filled_now)
+  for (int pass = 0; pass < max_passes && !pending.empty(); ++pass) {
+    const long count = static_cast<long>(pending.size());
+    long filled_now = 0;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(+ : filled_now)
     for (long k = 0; k < count; ++k) {
-      const int i = active.pixels[k];
-      if (known[i] != 0) continue;
+      const int i = pending[k];
       const int x = i % W, y = i / W;
       const bool next_to_known =
           (x > 0 && known[i - 1] == 1) || (x + 1 < W && known[i + 1] == 1) ||
           (y > 0 && known[i - W] == 1) || (y + 1 < H && known[i + W] == 1);
-      if (!next_to_known) {
-        ++left;
-        continue;
-      }
+      filled[k] = next_to_known ? 1 : 0;
+      if (!next_to_known) continue;
       chooseCandidate(level, huber_eps, penalty, soft, normals, known.data(),
                       i);
-      filled[i] = 1;
       ++filled_now;
     }
-    for (int i : active.pixels) {
-      if (filled[i] != 0) known[i] = 1;
+    // The filled ones become known; the others stay pending.
+    long left = 0;
+    for (long k = 0; k < count; ++k) {
+      if (filled[k] != 0) {
+        known[pending[k]] = 1;
+      } else {
+        pending[left++] = pending[k];
+      }
     }
-    if (left == 0 || filled_now == 0) break;
+    pending.resize(left);
+    if (filled_now == 0) break;
   }
 }
 

@@ -857,6 +857,7 @@ class SolverImpl {
       active_buffers_.preallocate(W, H, L, W * H / 16);
       unknown_.resize(static_cast<std::size_t>(W) * H);
       edge_scratch_map_.resize(static_cast<std::size_t>(W) * H);
+      fill_pending_.reserve(static_cast<std::size_t>(W) * H);
     }
     report.warm_started = use_warm;
     remaining_inner_ = settings_.max_total_inner_iterations;
@@ -920,7 +921,7 @@ class SolverImpl {
           internal::fillUnknownPixels(
               level, settings_.huber_eps, settings_.penalty,
               settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
-              active_, kFillPasses, edge_scratch_map_, threads_);
+              active_, kFillPasses, edge_scratch_map_, fill_pending_, threads_);
           report.warm_start_seconds = secondsSince(warm_start);
           refineActive(level, s, report);
           report.refine_seconds =
@@ -985,6 +986,7 @@ class SolverImpl {
   IterationState state_;
   PlanarImage candidate_;
   std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges(), fill
+  std::vector<int> fill_pending_;                ///< fillUnknownPixels()
   std::vector<unsigned char> unknown_;      ///< pixels the warm start lacked
   internal::ActiveSet active_;              ///< pixels of the local refinement
   internal::ActiveBuffers active_buffers_;  ///< their variables, gathered

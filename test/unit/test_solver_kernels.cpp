@@ -1005,8 +1005,9 @@ TEST(FillUnknownPixels, TakesTheNeighbourThatFitsTheData) {
   internal::ActiveSet active;
   active.build(unknown, W, H, 0);
   std::vector<unsigned char> scratch;
+  std::vector<int> pending;
   internal::fillUnknownPixels(level, 0.0, DataPenalty::kL2, true, n, known,
-                              active, 16, scratch, 2);
+                              active, 16, scratch, pending, 2);
   for (int y = 0; y < H; ++y) {
     for (int x = 7; x < 13; ++x) {
       const float* side = x < 10 ? a : b;

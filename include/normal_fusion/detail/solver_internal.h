@@ -129,12 +129,15 @@ void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
 /// its own observations, the one of the lowest energy terms with those
 /// neighbours; it is then known. Pixels still unknown after `max_passes` keep
 /// their normal.
-/// `filled` is scratch (resized); `threads` share each pass.
+/// `filled` and `pending` are scratch (grown to the unknown pixels' count;
+/// reserve them once for a stream without allocations); `threads` share
+/// each pass.
 void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
-                       std::vector<unsigned char>& filled, int threads);
+                       std::vector<unsigned char>& filled,
+                       std::vector<int>& pending, int threads);
 
 /// The variables of a local refinement gathered into contiguous arrays, one
 /// array per component (the fast path of runInnerActive()). Nodes are the
