@@ -139,6 +139,13 @@ inline float blendCorners(float p00, float p01, float p10, float p11, float tx,
          ty * ((1 - tx) * p10 + tx * p11);
 }
 
+/// out = R s (R row-major, float).
+inline void rotate(const float* R, const float s[3], float out[3]) {
+  for (int r = 0; r < 3; ++r) {
+    out[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
+  }
+}
+
 /// Bilinear blend of 3 planes at the corners i00, i00 + dx | i00 + dy,
 /// i00 + dy + dx (weights tx, ty), rotated by R: out = R blend.
 inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
@@ -149,9 +156,7 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
     s[c] = blendCorners(p[i00], p[i00 + dx], p[i00 + dy], p[i00 + dy + dx], tx,
                         ty);
   }
-  for (int r = 0; r < 3; ++r) {
-    out[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
-  }
+  rotate(R, s, out);
 }
 
 /// Pixels per chunk of warpNormalsChunk().
@@ -253,9 +258,7 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                            t_x[j], t_y[j]);
     }
     float n[3];
-    for (int r = 0; r < 3; ++r) {
-      n[r] = R[3 * r] * s[0] + R[3 * r + 1] * s[1] + R[3 * r + 2] * s[2];
-    }
+    rotate(R, s, n);
     const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     const bool ok = (in_flag[j] != 0.0) & blend & (len > 1e-6f);
     const float safe_len = ok ? len : 1.0f;
