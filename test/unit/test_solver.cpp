@@ -25,13 +25,14 @@ FusionProblem noisyTwoPlanes(int W, int H, double sigma, NormalMap* gt,
   return problem;
 }
 
-/// The two-plane scene with two noisy inputs (sigma_0 with seed 7, sigma_1
-/// with seed 11).
-FusionProblem twoPlanesTwoInputs(double sigma_0, double sigma_1,
-                                 NormalMap* gt) {
-  FusionProblem problem = noisyTwoPlanes(64, 48, sigma_0, gt);
+/// The W x H two-plane scene with two noisy inputs (sigma_0 with seed 7,
+/// sigma_1 with seed_1).
+FusionProblem twoPlanesTwoInputs(double sigma_0, double sigma_1, NormalMap* gt,
+                                 int W = 64, int H = 48,
+                                 std::uint64_t seed_1 = 11) {
+  FusionProblem problem = noisyTwoPlanes(W, H, sigma_0, gt);
   NormalInput second;
-  second.normals = test::noisy(*gt, sigma_1, 11);
+  second.normals = test::noisy(*gt, sigma_1, seed_1);
   problem.inputs.push_back(second);
   return problem;
 }
@@ -355,10 +356,7 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
 /// chooser's second step always runs on one (each count measured once).
 TEST(Solver, AdaptiveRefineThreadsGiveTheSameBits) {
   NormalMap gt;
-  FusionProblem problem = noisyTwoPlanes(160, 120, 0.5, &gt);
-  NormalInput second;
-  second.normals = test::noisy(gt, 0.3, 12);
-  problem.inputs.push_back(second);
+  const FusionProblem problem = twoPlanesTwoInputs(0.5, 0.3, &gt, 160, 120, 12);
   SolverState converged;
   Solver(convergedSettings()).solve(problem, converged, false);
   SolverState holed = converged;
@@ -494,10 +492,7 @@ TEST(Solver, WarmStartMovesAnEdgeOfTheMap) {
 
 TEST(Solver, FastBackendMatchesReferenceOnAWholeSolve) {
   NormalMap gt;
-  FusionProblem problem = noisyTwoPlanes(40, 30, 0.4, &gt);
-  NormalInput second;
-  second.normals = test::noisy(gt, 0.2, 99);
-  problem.inputs.push_back(second);
+  const FusionProblem problem = twoPlanesTwoInputs(0.4, 0.2, &gt, 40, 30, 99);
   SolverSettings settings;
   settings.max_total_inner_iterations = 200;
   settings.relative_tolerance = 0.0;
