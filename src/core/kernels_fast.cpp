@@ -542,8 +542,8 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
       for (int ch = 0; ch < 3; ++ch) {
         divergenceRightBelowContiguous(
             np, b.p[ch].data() + k0, b.p[ch].data() + P + k0,
-            b.pixel_links[1].data() + k0, b.pixel_links[3].data() + k0,
-            b.p[ch].data(), b.d[ch].data() + k0);
+            b.left_link.data() + k0, b.above_link.data() + k0, b.p[ch].data(),
+            b.d[ch].data() + k0);
         for (int l = 0; l < L; ++l) {
           subtractRow(np, b.q.data() + (3 * l + ch) * P + k0,
                       b.d[ch].data() + k0);

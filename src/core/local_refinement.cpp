@@ -201,7 +201,7 @@ void ActiveBuffers::preallocate(int W, int H, int L, int active) {
   // energy()'s partial sums, one per block of terms.
   growTo(block_sums, (links + kEnergyBlock - 1) / kEnergyBlock +
                          L * ((P + kEnergyBlock - 1) / kEnergyBlock));
-  for (auto& list : pixel_links) growTo(list, P);
+  for (auto* list : {&left_link, &above_link}) growTo(*list, P);
 }
 
 void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
@@ -282,7 +282,7 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   growTo(f, static_cast<std::size_t>(3) * L * P);
   growTo(c, static_cast<std::size_t>(L) * P);
   growTo(delta, static_cast<std::size_t>(L) * P);
-  for (auto& list : pixel_links) growTo(list, P);
+  for (auto* list : {&left_link, &above_link}) growTo(*list, P);
     // The values, copied in parallel.
 #pragma omp parallel num_threads(threads)
   {
@@ -324,17 +324,14 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
         delta[l * P + k] =
             level.data_huber ? level.data_eps[l].plane(0)[i] : 0.0f;
       }
-      for (auto& list : pixel_links) list[k] = num_links;
+      left_link[k] = above_link[k] = num_links;
     }
-    // Each link is the right (below) link of its first node and the left
-    // (above) link of its second (one link per entry: no two threads write
-    // the same one).
+    // Each link is the left (upper) link of its second node (one link per
+    // entry: no two threads write the same one).
 #pragma omp for schedule(static) nowait
     for (int m = 0; m < num_links; ++m) {
-      if (link_pixel[m] < 0) continue;  // dummies stay out
-      const int side = isHorizontal(m) ? 0 : 2;
-      if (link_a[m] < P) pixel_links[side][link_a[m]] = m;
-      if (link_b[m] < P) pixel_links[side + 1][link_b[m]] = m;
+      if (link_pixel[m] < 0 || link_b[m] >= P) continue;  // dummy, ghost
+      (isHorizontal(m) ? left_link : above_link)[link_b[m]] = m;
     }
 #pragma omp for schedule(static)
     for (long k = 0; k < num_nodes; ++k) node_of[node_pixel[k]] = -1;

@@ -163,9 +163,10 @@ struct ActiveBuffers {
   std::array<std::vector<float>, 3> n, n0, ray;  ///< per active pixel
   std::vector<float> q, f;  ///< component ch of input l at [(3 l + ch) P + k]
   std::vector<float> c, delta;  ///< input l at [l P + k]
-  /// Links of each active pixel: to the right, left, below, above (the dummy
-  /// where there is none).
-  std::array<std::vector<int>, 4> pixel_links;
+  /// The link to the left of and the link above each active pixel (the
+  /// dummy where there is none); its links to the right and below are k and
+  /// P + k.
+  std::vector<int> left_link, above_link;
   std::vector<int> link_a, link_b;  ///< nodes of each link (p of a -> b)
   std::vector<int> link_pixel;  ///< pixel of node a of each link, -1: a dummy
   std::vector<float> link_w;    ///< w of each link
