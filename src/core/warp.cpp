@@ -292,12 +292,10 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
   // The warped state is written into the scratch buffers (sized once), then
   // swapped in.
-  scratch.normals.resize(W, H, 3);
   if (has_duals) {
-    scratch.dual_h.resize(W, H, 3);
-    scratch.dual_v.resize(W, H, 3);
-    scratch.dual_data.resize(L);
-    for (PlanarImage& q : scratch.dual_data) q.resize(W, H, 3);
+    scratch.resize(W, H, L);
+  } else {
+    scratch.normals.resize(W, H, 3);
   }
   // The duals' 3-plane groups (p_h, p_v, each q_l), source and destination.
   const int dual_groups = has_duals ? 2 + L : 0;
