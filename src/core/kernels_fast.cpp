@@ -48,6 +48,13 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
 
 // Row kernels: NF_MULTIVERSION (AVX-512, AVX2 and baseline x86-64 clones).
 
+/// Huber dual step in one division: clamp_w(a / (1 + sigma eps / w)) =
+/// a w / max(w + sigma eps, |a|) (0 where w = 0), the same value as the
+/// shrink-then-clamp of the reference.
+inline float huberDualScale(float len2, float w, float sigma_eps) {
+  return w / std::max(std::max(w + sigma_eps, std::sqrt(len2)), kTiny);
+}
+
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
 /// direction, with g = next - here given as two row pointers.
 NF_MULTIVERSION
@@ -59,25 +66,13 @@ void huberDualRow(int n, float sigma, float sigma_eps,
                   const float* __restrict next_y,
                   const float* __restrict next_z, float* __restrict px,
                   float* __restrict py, float* __restrict pz) {
-  if (sigma_eps == 0.0f) {
-    // Plain TV (eps = 0): the shrink factor is 1 (and w = 0 clamps to 0).
-    for (int x = 0; x < n; ++x) {
-      const float ax = px[x] + sigma * (next_x[x] - here_x[x]);
-      const float ay = py[x] + sigma * (next_y[x] - here_y[x]);
-      const float az = pz[x] + sigma * (next_z[x] - here_z[x]);
-      const float sc = clampScale(ax * ax + ay * ay + az * az, w[x]);
-      px[x] = ax * sc;
-      py[x] = ay * sc;
-      pz[x] = az * sc;
-    }
-    return;
-  }
   for (int x = 0; x < n; ++x) {
-    const float shrink = w[x] / (w[x] + sigma_eps + kTiny);
-    const float ax = (px[x] + sigma * (next_x[x] - here_x[x])) * shrink;
-    const float ay = (py[x] + sigma * (next_y[x] - here_y[x])) * shrink;
-    const float az = (pz[x] + sigma * (next_z[x] - here_z[x])) * shrink;
-    const float sc = clampScale(ax * ax + ay * ay + az * az, w[x]);
+    // a = p + sigma grad nbar; p <- a w / max(w + sigma eps, |a|).
+    const float ax = px[x] + sigma * (next_x[x] - here_x[x]);
+    const float ay = py[x] + sigma * (next_y[x] - here_y[x]);
+    const float az = pz[x] + sigma * (next_z[x] - here_z[x]);
+    const float sc =
+        huberDualScale(ax * ax + ay * ay + az * az, w[x], sigma_eps);
     px[x] = ax * sc;
     py[x] = ay * sc;
     pz[x] = az * sc;
@@ -113,14 +108,13 @@ void dataDualRowHuber(int n, float sigma, const float* __restrict c,
                       const float* __restrict fz, float* __restrict qx,
                       float* __restrict qy, float* __restrict qz) {
   for (int x = 0; x < n; ++x) {
-    // c / (c + sigma delta) = 1 / (1 + sigma delta / c); 0 where c = 0 (the
-    // clamp to radius 0 zeroes q there anyway).
-    const float denom = c[x] + sigma * delta[x];
-    const float s = denom > 0.0f ? c[x] / denom : 0.0f;
-    const float ax = (qx[x] + sigma * (nx[x] - fx[x])) * s;
-    const float ay = (qy[x] + sigma * (ny[x] - fy[x])) * s;
-    const float az = (qz[x] + sigma * (nz[x] - fz[x])) * s;
-    const float sc = clampScale(ax * ax + ay * ay + az * az, c[x]);
+    // a = q + sigma (nbar - f); q <- a c / max(c + sigma delta, |a|) (the
+    // shrink by c / (c + sigma delta) and the clamp to c in one division).
+    const float ax = qx[x] + sigma * (nx[x] - fx[x]);
+    const float ay = qy[x] + sigma * (ny[x] - fy[x]);
+    const float az = qz[x] + sigma * (nz[x] - fz[x]);
+    const float sc =
+        huberDualScale(ax * ax + ay * ay + az * az, c[x], sigma * delta[x]);
     qx[x] = ax * sc;
     qy[x] = ay * sc;
     qz[x] = az * sc;
@@ -388,12 +382,11 @@ void linkDualsIndexed(int num_links, float sigma, float sigma_eps,
                       float* __restrict px, float* __restrict py,
                       float* __restrict pz) {
   for (int m = 0; m < num_links; ++m) {
-    const float shrink =
-        sigma_eps == 0.0f ? 1.0f : w[m] / (w[m] + sigma_eps + kTiny);
-    const float ax = (px[m] + sigma * (nx[b[m]] - nx[a[m]])) * shrink;
-    const float ay = (py[m] + sigma * (ny[b[m]] - ny[a[m]])) * shrink;
-    const float az = (pz[m] + sigma * (nz[b[m]] - nz[a[m]])) * shrink;
-    const float sc = clampScale(ax * ax + ay * ay + az * az, w[m]);
+    const float ax = px[m] + sigma * (nx[b[m]] - nx[a[m]]);
+    const float ay = py[m] + sigma * (ny[b[m]] - ny[a[m]]);
+    const float az = pz[m] + sigma * (nz[b[m]] - nz[a[m]]);
+    const float sc =
+        huberDualScale(ax * ax + ay * ay + az * az, w[m], sigma_eps);
     px[m] = ax * sc;
     py[m] = ay * sc;
     pz[m] = az * sc;
@@ -411,12 +404,11 @@ void linkDualsFirstContiguous(
     const float* __restrict nz, float* __restrict px, float* __restrict py,
     float* __restrict pz) {
   for (int m = 0; m < num_links; ++m) {
-    const float shrink =
-        sigma_eps == 0.0f ? 1.0f : w[m] / (w[m] + sigma_eps + kTiny);
-    const float ax = (px[m] + sigma * (nx[b[m]] - ax_[m])) * shrink;
-    const float ay = (py[m] + sigma * (ny[b[m]] - ay_[m])) * shrink;
-    const float az = (pz[m] + sigma * (nz[b[m]] - az_[m])) * shrink;
-    const float sc = clampScale(ax * ax + ay * ay + az * az, w[m]);
+    const float ax = px[m] + sigma * (nx[b[m]] - ax_[m]);
+    const float ay = py[m] + sigma * (ny[b[m]] - ay_[m]);
+    const float az = pz[m] + sigma * (nz[b[m]] - az_[m]);
+    const float sc =
+        huberDualScale(ax * ax + ay * ay + az * az, w[m], sigma_eps);
     px[m] = ax * sc;
     py[m] = ay * sc;
     pz[m] = az * sc;
