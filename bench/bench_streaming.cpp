@@ -6,6 +6,11 @@
 // table per frame (with the phases of the live frame: warp, preparation, warm
 // start, refinement) and the worst case. Not a test: timings depend on the
 // machine and its load.
+//
+// Each frame also gets the energy gap of the live map to the converged cold
+// solve, and with --continue N1,N2,... the deficit of the live state solved
+// on (whole image, no budget) for N1, N2, ... more inner iterations at most:
+// how much whole-image work a frame would need to match the cold solve.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -68,6 +73,8 @@ int main(int argc, char** argv) {
   // --adaptive-threads 0|1: the local refinement's thread choice
   // (SolverSettings::adaptive_refine_threads; default on).
   int adaptive_threads = 1;
+  // --continue N1,N2,...: see above.
+  std::vector<int> continue_caps;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -101,7 +108,21 @@ int main(int argc, char** argv) {
       busy_threads = static_cast<int>(value);
     else if (key == "--reset-duals")
       reset_duals = value != 0.0 ? 1 : 0;
-    else {
+    else if (key == "--continue") {
+      for (const char* c = argv[i + 1]; *c != '\0';) {
+        char* end = nullptr;
+        const long cap = std::strtol(c, &end, 10);
+        if (end == c || cap <= 0) {
+          std::fprintf(stderr,
+                       "bench_streaming: --continue wants positive iteration "
+                       "counts separated by commas, got %s\n",
+                       argv[i + 1]);
+          return 2;
+        }
+        continue_caps.push_back(static_cast<int>(cap));
+        c = *end == ',' ? end + 1 : end;
+      }
+    } else {
       std::fprintf(stderr, "bench_streaming: unknown option %s\n", key.c_str());
       return 2;
     }
@@ -124,6 +145,10 @@ int main(int argc, char** argv) {
   converged.max_total_inner_iterations = 4000;
   converged.max_outer_iterations = 400;
   nf::SolverSettings startup = converged;
+  // Solving the live state on: the whole image from it (no refinement), to
+  // the converged solve's tolerance or the cap.
+  nf::SolverSettings continued = converged;
+  continued.warm_refine_iterations = 0;
 
   std::printf(
       "# streaming: scene %d, %dx%d, 2 inputs, %.2f deg/frame, budget %.1f ms "
@@ -142,10 +167,15 @@ int main(int argc, char** argv) {
       "refine ms | whole-image its (outer steps / rejected) | refined px | "
       "refine its (on one thread) | warm | PSNR live (dB) "
       "| PSNR converged (dB) | deficit (dB) | PSNR warm start (dB) | PSNR "
-      "warped ground truth (dB) |\n");
+      "warped ground truth (dB) | energy gap to converged (%%) |");
+  for (int cap : continue_caps) {
+    std::printf(" deficit after %d more its (dB) |", cap);
+  }
   std::printf(
-      "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|---:|"
-      "---:|---:|\n");
+      "\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|"
+      "---:|---:|---:|---:|");
+  for (std::size_t c = 0; c < continue_caps.size(); ++c) std::printf("---:|");
+  std::printf("\n");
   std::atomic<bool> stop_busy{false};
   std::vector<std::thread> busy;
   for (int t = 0; t < busy_threads; ++t) {
@@ -159,6 +189,9 @@ int main(int argc, char** argv) {
   nf::SolverState state, warp_scratch;
   nf::SolveReport report;
   double worst_ms = 0.0, worst_deficit = -1e9, sum_ms = 0.0, sum_deficit = 0.0;
+  double worst_gap = -1e9;
+  std::vector<double> worst_continued(continue_caps.size(), -1e9),
+      sum_continued(continue_caps.size(), 0.0);
   for (int k = 0; k <= frames; ++k) {
     const nf::FusionProblem problem = makeProblem(sequence[k], k);
     if (k == 0) {
@@ -211,18 +244,37 @@ int main(int argc, char** argv) {
     worst_deficit = std::max(worst_deficit, deficit);
     sum_ms += ms;
     sum_deficit += deficit;
+    // The live map's energy on this frame against the converged solve's.
+    const double energy_live =
+        nf::computeEnergy(problem, converged, state.normals);
+    const double energy_best = nf::computeEnergy(problem, converged, best);
+    const double gap = 100.0 * (energy_live - energy_best) / energy_best;
+    worst_gap = std::max(worst_gap, gap);
     std::printf(
         "| %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %d (%d / %d) | %d | "
         "%d (%d) | "
         "%s | "
-        "%.2f | %.2f | %.3f | %.2f | %.2f |\n",
+        "%.2f | %.2f | %.3f | %.2f | %.2f | %.3f |",
         k, ms, warp_ms, solve_ms, 1e3 * report.prepare_seconds,
         1e3 * report.warm_start_seconds, 1e3 * report.refine_seconds,
         report.inner_iterations, report.outer_iterations,
         report.rejected_outer_steps, report.refined_pixels,
         report.refine_iterations, report.refine_single_thread_iterations,
         report.warm_started ? "yes" : "no", psnr_live, psnr_best, deficit,
-        psnr_start, psnr_warped_gt);
+        psnr_start, psnr_warped_gt, gap);
+    for (std::size_t c = 0; c < continue_caps.size(); ++c) {
+      nf::SolverSettings capped = continued;
+      capped.max_total_inner_iterations = continue_caps[c];
+      nf::Solver continuing(capped);
+      nf::SolverState copy = state;
+      continuing.solve(problem, copy, true);
+      const double d =
+          psnr_best - nf::psnr(copy.normals, sequence[k].normals_gt);
+      worst_continued[c] = std::max(worst_continued[c], d);
+      sum_continued[c] += d;
+      std::printf(" %.3f |", d);
+    }
+    std::printf("\n");
     std::fflush(stdout);
   }
   stop_busy = true;
@@ -238,6 +290,15 @@ int main(int argc, char** argv) {
       "%.3f dB): %s\n",
       worst_deficit, sum_deficit / frames,
       worst_deficit <= 0.2 ? "within 0.2 dB" : "NOT within 0.2 dB");
+  std::printf(
+      "worst energy gap of the live map to the converged cold solve: %.3f %%\n",
+      worst_gap);
+  for (std::size_t c = 0; c < continue_caps.size(); ++c) {
+    std::printf(
+        "live state solved on for %d more inner iterations at most: worst "
+        "deficit %.3f dB (mean %.3f dB)\n",
+        continue_caps[c], worst_continued[c], sum_continued[c] / frames);
+  }
   // Peak resident memory of the whole process (the renders of the sequence,
   // both solvers and their states included).
   rusage usage{};
