@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -44,6 +45,30 @@ nf::FusionProblem makeProblem(const nf::synthetic::Frame& frame, int index) {
       nf::synthetic::normalsFromNoisyDepth(frame, 0.0015, 0.02, 2000 + index);
   problem.inputs = {noisy, depth};
   return problem;
+}
+
+/// The share (0..1) of sum_i |a_i - b_i|^2 that the `fraction` of pixels
+/// with the largest differences hold: how concentrated the difference is.
+double shareOfLargestDifferences(const nf::NormalMap& a, const nf::NormalMap& b,
+                                 double fraction) {
+  const int n = a.width() * a.height();
+  std::vector<double> d2(n);
+  double total = 0.0;
+  for (int i = 0; i < n; ++i) {
+    double e = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double v = a.plane(c)[i] - b.plane(c)[i];
+      e += v * v;
+    }
+    d2[i] = e;
+    total += e;
+  }
+  const int top = std::min(n, static_cast<int>(fraction * n));
+  std::nth_element(d2.begin(), d2.begin() + top, d2.end(),
+                   std::greater<double>());
+  double held = 0.0;
+  for (int i = 0; i < top; ++i) held += d2[i];
+  return total > 0.0 ? held / total : 0.0;
 }
 
 }  // namespace
@@ -171,10 +196,16 @@ int main(int argc, char** argv) {
   for (int cap : continue_caps) {
     std::printf(" deficit after %d more its (dB) |", cap);
   }
+  if (!continue_caps.empty()) {
+    std::printf(
+        " share of the live map's difference to the last of them in its 20 "
+        "%% most different pixels (%%) |");
+  }
   std::printf(
       "\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|"
       "---:|---:|---:|---:|");
   for (std::size_t c = 0; c < continue_caps.size(); ++c) std::printf("---:|");
+  if (!continue_caps.empty()) std::printf("---:|");
   std::printf("\n");
   std::atomic<bool> stop_busy{false};
   std::vector<std::thread> busy;
@@ -262,17 +293,23 @@ int main(int argc, char** argv) {
         report.refine_iterations, report.refine_single_thread_iterations,
         report.warm_started ? "yes" : "no", psnr_live, psnr_best, deficit,
         psnr_start, psnr_warped_gt, gap);
+    nf::SolverState continued_state;
     for (std::size_t c = 0; c < continue_caps.size(); ++c) {
       nf::SolverSettings capped = continued;
       capped.max_total_inner_iterations = continue_caps[c];
       nf::Solver continuing(capped);
-      nf::SolverState copy = state;
-      continuing.solve(problem, copy, true);
+      continued_state = state;
+      continuing.solve(problem, continued_state, true);
       const double d =
-          psnr_best - nf::psnr(copy.normals, sequence[k].normals_gt);
+          psnr_best - nf::psnr(continued_state.normals, sequence[k].normals_gt);
       worst_continued[c] = std::max(worst_continued[c], d);
       sum_continued[c] += d;
       std::printf(" %.3f |", d);
+    }
+    if (!continue_caps.empty()) {
+      std::printf(" %.0f |",
+                  100.0 * shareOfLargestDifferences(
+                              state.normals, continued_state.normals, 0.2));
     }
     std::printf("\n");
     std::fflush(stdout);
