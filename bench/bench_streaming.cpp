@@ -100,6 +100,13 @@ int main(int argc, char** argv) {
   int adaptive_threads = 1;
   // --continue N1,N2,...: see above.
   std::vector<int> continue_caps;
+  // --startup converged|live: the start-up frame solved to convergence
+  // (default) or with the live settings as a stream's first frame, as the
+  // node solves it (under cold_start_budget_ms).
+  bool startup_live = false;
+  // --cold-start-budget-ms X: SolverSettings::cold_start_budget_ms of the
+  // live settings (default: the solver's, none).
+  double cold_start_budget_ms = -1.0;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -133,7 +140,19 @@ int main(int argc, char** argv) {
       busy_threads = static_cast<int>(value);
     else if (key == "--reset-duals")
       reset_duals = value != 0.0 ? 1 : 0;
-    else if (key == "--continue") {
+    else if (key == "--cold-start-budget-ms")
+      cold_start_budget_ms = value;
+    else if (key == "--startup") {
+      const std::string mode = argv[i + 1];
+      if (mode != "converged" && mode != "live") {
+        std::fprintf(stderr,
+                     "bench_streaming: --startup wants converged or live, got "
+                     "%s\n",
+                     argv[i + 1]);
+        return 2;
+      }
+      startup_live = mode == "live";
+    } else if (key == "--continue") {
       for (const char* c = argv[i + 1]; *c != '\0';) {
         char* end = nullptr;
         const long cap = std::strtol(c, &end, 10);
@@ -162,6 +181,9 @@ int main(int argc, char** argv) {
   if (refine >= 0) live.warm_refine_iterations = refine;
   if (refine_radius >= 0) live.warm_refine_radius = refine_radius;
   live.adaptive_refine_threads = adaptive_threads == 1;
+  if (cold_start_budget_ms >= 0.0) {
+    live.cold_start_budget_ms = cold_start_budget_ms;
+  }
   // As the node does: with the local refinement, the duals are reset.
   if (reset_duals < 0) reset_duals = live.warm_refine_iterations > 0 ? 1 : 0;
   nf::SolverSettings converged;
@@ -170,6 +192,7 @@ int main(int argc, char** argv) {
   converged.max_total_inner_iterations = 4000;
   converged.max_outer_iterations = 400;
   nf::SolverSettings startup = converged;
+  if (startup_live) startup = live;
   // Solving the live state on: the whole image from it (no refinement), to
   // the converged solve's tolerance or the cap.
   nf::SolverSettings continued = converged;
@@ -226,11 +249,19 @@ int main(int argc, char** argv) {
   for (int k = 0; k <= frames; ++k) {
     const nf::FusionProblem problem = makeProblem(sequence[k], k);
     if (k == 0) {
-      // Start-up frame: solved to convergence before the stream starts, by
-      // the live solver itself, so that its buffers exist once the stream
-      // runs (steady state).
+      // Start-up frame: solved to convergence before the stream starts (or,
+      // with --startup live, as a stream's first frame with the live
+      // settings), by the live solver itself, so that its buffers exist once
+      // the stream runs (steady state).
       live_solver.setSettings(startup);
-      live_solver.solve(problem, state, false, report);
+      live_solver.solve(problem, state, /*warm_start=*/startup_live, report);
+      std::printf(
+          "# start-up frame: %s, %d inner iterations (%d on coarser levels), "
+          "%.0f ms%s\n",
+          startup_live ? "live settings, a stream's cold start" : "converged",
+          report.inner_iterations, report.coarse_inner_iterations,
+          1e3 * report.seconds,
+          report.budget_exhausted ? ", stopped by its budget" : "");
       live_solver.setSettings(live);
       warp_scratch.resize(width, height, 2);
       continue;

@@ -119,6 +119,15 @@ struct SolverSettings {
   double relative_tolerance =
       1e-4;                     ///< stop when (E_prev - E) / E_prev falls below
   double time_budget_ms = 0.0;  ///< wall-clock budget; 0 = none (anytime)
+  /// The budget of a stream's cold start: a solve asked to warm-start whose
+  /// state cannot be used (empty, or of another size), while time_budget_ms
+  /// is set. 0 = none (the iteration caps and the tolerance end it), > 0 =
+  /// this many ms. Warm frames carry a cold start's map on and refine only
+  /// where the view changed, so a stream's quality is set by how well its
+  /// first frame was solved: cut to a live frame's budget it leaves a map
+  /// many dB worse for many frames (bench_streaming --cold-start-budget-ms).
+  /// Solves not asked to warm-start keep time_budget_ms.
+  double cold_start_budget_ms = 0.0;
 
   /// Coarse-to-fine levels on a cold start: 1 = off, 0 = automatic (used when
   /// some pixels have no valid input), n > 1 = exactly n levels (fewer if the

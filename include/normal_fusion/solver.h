@@ -79,6 +79,9 @@ struct SolveReport {
   bool warm_started = false;
   bool converged = false;         ///< stopped on the relative tolerance
   bool budget_exhausted = false;  ///< stopped on the wall-clock budget
+  /// A stream's cold start under time_budget_ms: the solve ran under
+  /// SolverSettings::cold_start_budget_ms instead.
+  bool cold_start_budget_used = false;
   int pyramid_levels = 1;
   int num_inputs = 0;
   int valid_pixels = 0;   ///< pixels with at least one usable observation
@@ -103,7 +106,9 @@ class Solver {
 
   /// Solves one frame. On return `state` holds the fused unit normals (every
   /// pixel) and the duals. With `warm_start` and a compatible `state`, starts
-  /// from it; otherwise cold-starts (see SolveReport::warm_started).
+  /// from it; otherwise cold-starts (see SolveReport::warm_started; with
+  /// `warm_start` that is a stream's cold start, which runs under
+  /// SolverSettings::cold_start_budget_ms).
   /// Throws InputError on bad input; `state` is then left unchanged.
   SolveReport solve(const FusionProblem& problem, SolverState& state,
                     bool warm_start = false);

@@ -61,6 +61,7 @@ void SolverSettings::validate() const {
   requireAtLeast("max_total_inner_iterations", max_total_inner_iterations, 1);
   requireAtLeast("relative_tolerance", relative_tolerance, 0.0);
   requireAtLeast("time_budget_ms", time_budget_ms, 0.0);
+  requireAtLeast("cold_start_budget_ms", cold_start_budget_ms, 0.0);
   requireRange("pyramid_levels", pyramid_levels, 0, 12);
   requireRange("num_threads", num_threads, 0, 1024);
   requireAtLeast("tau", tau, 0.0);

@@ -812,12 +812,10 @@ class SolverImpl {
              SolveReport& report) {
     const Clock::time_point start = Clock::now();
     solve_start_ = start;
-    has_deadline_ = settings_.time_budget_ms > 0.0;
-    deadline_ = (has_budget_start_ ? budget_start_ : start) +
-                std::chrono::duration_cast<Clock::duration>(
-                    std::chrono::duration<double, std::milli>(
-                        settings_.time_budget_ms));
+    const Clock::time_point budget_start =
+        has_budget_start_ ? budget_start_ : start;
     has_budget_start_ = false;
+    setDeadline(budget_start, settings_.time_budget_ms);
     threads_ = resolveThreads(settings_.num_threads);
     if (refine_threads_.maxThreads() != threads_)
       refine_threads_.reset(threads_);
@@ -850,6 +848,13 @@ class SolverImpl {
     report.filled_pixels = W * H - finest.valid_pixels;
 
     const bool use_warm = warm && out.compatible(W, H, L);
+    if (warm && !use_warm && has_deadline_) {
+      // A stream's cold start (a warm start asked for, nothing usable to
+      // start from) under a frame budget: its own budget (none by default),
+      // since the warm frames after it carry its map on.
+      setDeadline(budget_start, settings_.cold_start_budget_ms);
+      report.cold_start_budget_used = true;
+    }
     if (!use_warm && settings_.warm_refine_iterations > 0) {
       // The local refinement's buffers, for the warm starts to come (sized
       // for 1/16 of the pixels; they grow if a frame needs more).
@@ -1182,6 +1187,14 @@ class SolverImpl {
 
   /// Majorize-minimize at one level: inner iterations on the tangent plane at
   /// n0, then n0 <- n / |n| when that lowers E (never raises it).
+  /// The solve ends by `budget_ms` after `from` (0 = no deadline).
+  void setDeadline(Clock::time_point from, double budget_ms) {
+    has_deadline_ = budget_ms > 0.0;
+    deadline_ =
+        from + std::chrono::duration_cast<Clock::duration>(
+                   std::chrono::duration<double, std::milli>(budget_ms));
+  }
+
   void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
                 SolveReport& report) {
     const InnerParams params = innerParams(level);

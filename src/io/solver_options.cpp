@@ -103,6 +103,10 @@ const std::map<std::string, Setter>& setters() {
        }},
       {"--time-budget-ms",
        [](auto& o, auto& v, auto& s) { s.time_budget_ms = parseDouble(o, v); }},
+      {"--cold-start-budget-ms",
+       [](auto& o, auto& v, auto& s) {
+         s.cold_start_budget_ms = parseDouble(o, v);
+       }},
       {"--pyramid-levels",
        [](auto& o, auto& v, auto& s) { s.pyramid_levels = parseInt(o, v); }},
       {"--threads",
@@ -218,6 +222,9 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << d.relative_tolerance << "]\n"
       << "  --time-budget-ms X    wall-clock budget, 0 = none ["
       << d.time_budget_ms << "]\n"
+      << "  --cold-start-budget-ms X  budget of a cold start while a budget is "
+         "set, 0 = none ["
+      << d.cold_start_budget_ms << "]\n"
       << "  --warm-refine-iterations N  local refinement of a warm start's "
          "unknown pixels, 0 = off ["
       << d.warm_refine_iterations << "]\n"

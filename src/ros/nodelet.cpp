@@ -462,6 +462,7 @@ void NormalFusionNodelet::workerLoop() {
       continue;
     }
     if (!output.warning.empty()) logThrottled(false, output.warning);
+    if (!output.note.empty()) NODELET_INFO("%s", output.note.c_str());
     ++frames_processed_;
     const double latency = (ros::WallTime::now() - formed).toSec();
     output.stats->latency = latency;

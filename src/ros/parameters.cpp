@@ -63,6 +63,7 @@ void visitParameters(NodeSettings& s, Visitor& v) {
             kIntMax);
   v.real("relative_tolerance", solver.relative_tolerance, 0.0, kInf);
   v.real("time_budget_ms", solver.time_budget_ms, 0.0, kInf);
+  v.real("cold_start_budget_ms", solver.cold_start_budget_ms, 0.0, kInf);
   v.integer("warm_refine_iterations", solver.warm_refine_iterations, 0, 100000);
   v.integer("warm_refine_radius", solver.warm_refine_radius, 0, 16);
   v.integer("pyramid_levels", solver.pyramid_levels, 0, 12);

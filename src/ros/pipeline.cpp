@@ -299,7 +299,18 @@ void FusionPipeline::process(const InputSet& set,
     resetWarmStart();
   }
   std::string reason;
-  if (settings_.warm_start && canWarmStart(problem_.K, stamp, &reason)) {
+  // A warm start wanted but the previous map unusable (no previous frame,
+  // another size or K, too long a gap): the stream (re)starts here. Its cold
+  // start is solved under cold_start_budget_ms (the solver's rule for a warm
+  // start asked for without a usable state), since the warm frames after it
+  // carry its map on. A rotation that cannot be looked up is a one-frame
+  // failure instead: that frame is cold-started under the frame budget.
+  bool stream_start = false;
+  output->note.clear();
+  if (settings_.warm_start && !canWarmStart(problem_.K, stamp, &reason)) {
+    stream_start = true;
+    state_.clear();
+  } else if (settings_.warm_start) {
     warm = true;
     if (!settings_.fixed_frame.empty()) {
       std::array<double, 9> R_cur_prev{};
@@ -335,7 +346,7 @@ void FusionPipeline::process(const InputSet& set,
   try {
     // time_budget_ms covers the whole frame: conversion, warp and solve.
     solver_.setBudgetStart(started);
-    solver_.solve(problem_, state_, warm, report_);
+    solver_.solve(problem_, state_, warm || stream_start, report_);
     // The warp's buffers, sized with the state (allocates on the first frame
     // of a size only).
     warp_scratch_.resize(state_.normals.width(), state_.normals.height(),
@@ -343,6 +354,25 @@ void FusionPipeline::process(const InputSet& set,
   } catch (...) {
     resetWarmStart();
     throw;
+  }
+  if (stream_start) {
+    std::ostringstream text;
+    text << "stream (re)started (" << reason << "): cold start in "
+         << std::lround(1e3 * report_.seconds) << " ms, "
+         << report_.inner_iterations + report_.coarse_inner_iterations
+         << " inner iterations";
+    if (report_.cold_start_budget_used) {
+      const double budget = solver_.settings().cold_start_budget_ms;
+      text << " under cold_start_budget_ms ";
+      if (budget > 0.0) {
+        text << "(" << budget << " ms)";
+      } else {
+        text << "(none: the iteration caps)";
+      }
+      text << " instead of time_budget_ms ("
+           << solver_.settings().time_budget_ms << " ms)";
+    }
+    output->note = text.str();
   }
   has_previous_ = true;
   previous_stamp_ = stamp;

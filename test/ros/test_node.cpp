@@ -252,6 +252,37 @@ TEST(Node, AnswersEverySetWithItsStampAndBeatsTheInputs) {
   }
 }
 
+/// Launched with live:=true (~expect_live), the node's parameters are the
+/// live overlay's (config/live.yaml) over the defaults; without it, the
+/// defaults (no frame budget).
+TEST(Node, LaunchedLiveHasTheLiveOverlay) {
+  if (compareMode()) GTEST_SKIP();
+  bool expect_live = false;
+  ros::NodeHandle("~").getParam("expect_live", expect_live);
+  std::string node_name;
+  ASSERT_TRUE(ros::NodeHandle("~").getParam("node_name", node_name));
+  const ros::NodeHandle node(node_name);
+  double budget = -1.0, cold_budget = -1.0, tolerance = -1.0;
+  int max_iterations = -1, max_outer = -1;
+  ASSERT_TRUE(node.getParam("time_budget_ms", budget));
+  ASSERT_TRUE(node.getParam("cold_start_budget_ms", cold_budget));
+  ASSERT_TRUE(node.getParam("relative_tolerance", tolerance));
+  ASSERT_TRUE(node.getParam("max_total_inner_iterations", max_iterations));
+  ASSERT_TRUE(node.getParam("max_outer_iterations", max_outer));
+  EXPECT_EQ(cold_budget, 0.0);
+  if (expect_live) {
+    EXPECT_EQ(budget, 33.0);
+    EXPECT_EQ(tolerance, 1e-6);
+    EXPECT_EQ(max_iterations, 4000);
+    EXPECT_EQ(max_outer, 400);
+  } else {
+    EXPECT_EQ(budget, 0.0);
+    EXPECT_EQ(tolerance, 1e-4);
+    EXPECT_EQ(max_iterations, 1000);
+    EXPECT_EQ(max_outer, 40);
+  }
+}
+
 /// The process that runs the node (~process_node: the nodelet manager, or
 /// the standalone node) has the launch file's OMP_WAIT_POLICY, passive by
 /// default: its pid from the node's XML-RPC API, its environment from /proc.

@@ -696,6 +696,50 @@ TEST(Pipeline, WarmStartNeedsASmallForwardGapAndTheSameK) {
   EXPECT_FALSE(out.stats->warm_started);
 }
 
+/// Under a frame budget too short for anything, a stream's first frame (and
+/// its restart after time went backwards) is solved under
+/// cold_start_budget_ms (none: the iteration caps) and says so in a note;
+/// the warm frames in between keep the frame budget. With warm starts off
+/// every frame is a one-shot cold start under the frame budget.
+TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
+  SceneFixture fixture;
+  fixture.settings.solver.time_budget_ms = 1e-3;
+  fixture.settings.solver.max_total_inner_iterations = 60;
+  fixture.settings.solver.relative_tolerance = 0.0;
+  fixture.settings.solver.pyramid_levels = 1;
+  const test::NoisyFrame f =
+      test::noisyFrame(synthetic::renderScene(0, 64, 48), 5);
+  FusionPipeline pipeline(fixture.settings, TopicNames::defaults(2));
+  PipelineOutput out;
+  pipeline.process(fixture.setFor(f, 1.0), nullptr, false, &out);
+  EXPECT_FALSE(out.stats->warm_started);
+  EXPECT_FALSE(out.stats->budget_exhausted);
+  EXPECT_EQ(out.stats->inner_iterations, 60);
+  EXPECT_NE(out.note.find("cold start"), std::string::npos) << out.note;
+  EXPECT_NE(out.note.find("cold_start_budget_ms"), std::string::npos)
+      << out.note;
+  pipeline.process(fixture.setFor(f, 1.1), nullptr, false, &out);
+  EXPECT_TRUE(out.stats->warm_started);
+  EXPECT_TRUE(out.stats->budget_exhausted);
+  EXPECT_TRUE(out.note.empty()) << out.note;
+  // Time went backwards: the stream restarts, again under its own budget.
+  pipeline.process(fixture.setFor(f, 0.5), nullptr, false, &out);
+  EXPECT_FALSE(out.stats->warm_started);
+  EXPECT_FALSE(out.stats->budget_exhausted);
+  EXPECT_EQ(out.stats->inner_iterations, 60);
+  EXPECT_FALSE(out.note.empty());
+
+  fixture.settings.warm_start = false;
+  FusionPipeline cold(fixture.settings, TopicNames::defaults(2));
+  for (double stamp : {1.0, 1.1}) {
+    cold.process(fixture.setFor(f, stamp), nullptr, false, &out);
+    EXPECT_FALSE(out.stats->warm_started);
+    EXPECT_TRUE(out.stats->budget_exhausted);
+    EXPECT_LT(out.stats->inner_iterations, 60);
+    EXPECT_TRUE(out.note.empty()) << out.note;
+  }
+}
+
 TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
   SceneFixture fixture;
   fixture.settings.fixed_frame = "world";

@@ -574,6 +574,58 @@ TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
   EXPECT_EQ(report.inner_iterations, 200);
 }
 
+/// A stream's cold start (a warm start asked for, no usable state) runs
+/// under cold_start_budget_ms (0 = none), not under the frame budget; a
+/// one-shot cold solve and a warm frame keep the frame budget. Each frame's
+/// budget is spent before the solve starts (setBudgetStart 10 s back), so
+/// only the rule decides whether it stops early.
+TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings;
+  settings.time_budget_ms = 2000.0;
+  settings.inner_iterations = 10;
+  settings.max_total_inner_iterations = 200;
+  settings.relative_tolerance = 0.0;
+  Solver solver(settings);
+  SolveReport report;
+  auto spent_frame = [&] {
+    solver.setBudgetStart(std::chrono::steady_clock::now() -
+                          std::chrono::seconds(10));
+  };
+  // One-shot cold solve: the frame budget.
+  SolverState one_shot;
+  spent_frame();
+  solver.solve(problem, one_shot, false, report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_FALSE(report.cold_start_budget_used);
+  EXPECT_LT(report.inner_iterations, 200);
+  // A stream's cold start: no budget by default, all 200 iterations.
+  SolverState stream;
+  spent_frame();
+  solver.solve(problem, stream, true, report);
+  EXPECT_FALSE(report.warm_started);
+  EXPECT_TRUE(report.cold_start_budget_used);
+  EXPECT_FALSE(report.budget_exhausted);
+  EXPECT_EQ(report.inner_iterations, 200);
+  // The next (warm) frame: the frame budget again.
+  spent_frame();
+  solver.solve(problem, stream, true, report);
+  EXPECT_TRUE(report.warm_started);
+  EXPECT_FALSE(report.cold_start_budget_used);
+  EXPECT_TRUE(report.budget_exhausted);
+  // A cold-start budget of its own (spent too): it stops early.
+  settings.cold_start_budget_ms = 2000.0;
+  solver.setSettings(settings);
+  SolverState restart;
+  spent_frame();
+  solver.solve(problem, restart, true, report);
+  EXPECT_TRUE(report.cold_start_budget_used);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 200);
+  expectUnit(restart.normals);
+}
+
 /// Live (a time budget and the local refinement): a warm frame's time goes
 /// to the refinement and the frame ends with it; no whole-image iterations
 /// even when time is left. Without a budget they follow.
@@ -725,6 +777,9 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
   s = SolverSettings();
   s.time_budget_ms = -5;
   expect_bad(s, "time_budget_ms");
+  s = SolverSettings();
+  s.cold_start_budget_ms = -1;
+  expect_bad(s, "cold_start_budget_ms");
   s = SolverSettings();
   s.tau = 0.5;
   expect_bad(s, "tau");

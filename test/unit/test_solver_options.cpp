@@ -38,6 +38,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::applySolverOption("--preconditioning", "off", s);
   cli::applySolverOption("--threads", "1", s);
   cli::applySolverOption("--adaptive-refine-threads", "off", s);
+  cli::applySolverOption("--cold-start-budget-ms", "250", s);
   cli::applySolverOption("--backend", "reference", s);
   cli::applySolverOption("--tau", "0.1", s);
   cli::applySolverOption("--sigma", "0.2", s);
@@ -63,6 +64,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   EXPECT_EQ(s.max_total_inner_iterations, 333);
   EXPECT_EQ(s.relative_tolerance, 1e-5);
   EXPECT_EQ(s.time_budget_ms, 33.0);
+  EXPECT_EQ(s.cold_start_budget_ms, 250.0);
   EXPECT_EQ(s.pyramid_levels, 3);
   EXPECT_FALSE(s.preconditioning);
   EXPECT_EQ(s.num_threads, 1);
@@ -77,7 +79,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
        {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
         "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
         "--density-power", "--local-radius", "--hole-link-weight",
-        "--adaptive-refine-threads"}) {
+        "--adaptive-refine-threads", "--cold-start-budget-ms"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }

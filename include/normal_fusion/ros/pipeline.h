@@ -100,6 +100,9 @@ struct PipelineOutput {
   /// Something the caller should log (e.g. the rotation lookup failed and the
   /// frame was cold-started); empty when all went as asked.
   std::string warning;
+  /// Worth an info line: the stream (re)started here with a cold start, why,
+  /// and under which budget; empty otherwise.
+  std::string note;
 };
 
 class FusionPipeline {
