@@ -1185,8 +1185,6 @@ class SolverImpl {
     if (!reference) b.scatter(s, threads_);
   }
 
-  /// Majorize-minimize at one level: inner iterations on the tangent plane at
-  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
   /// The solve ends by `budget_ms` after `from` (0 = no deadline).
   void setDeadline(Clock::time_point from, double budget_ms) {
     has_deadline_ = budget_ms > 0.0;
@@ -1195,6 +1193,8 @@ class SolverImpl {
                    std::chrono::duration<double, std::milli>(budget_ms));
   }
 
+  /// Majorize-minimize at one level: inner iterations on the tangent plane at
+  /// n0, then n0 <- n / |n| when that lowers E (never raises it).
   void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
                 SolveReport& report) {
     const InnerParams params = innerParams(level);
