@@ -198,10 +198,14 @@ bool FusionPipeline::canWarmStart(const CameraIntrinsics& K,
       return false;
     }
   }
+  // The gap the previous set's own processing opened does not count: after
+  // a long solve (a stream's converged start) the next set solved is the
+  // newest, its stamp that much later.
   const double gap = (stamp - previous_stamp_).toSec();
-  if (gap > settings_.warm_start_max_gap) {
+  if (gap > settings_.warm_start_max_gap + previous_seconds_) {
     std::ostringstream text;
-    text << "stamp gap " << gap << " s exceeds warm_start_max_gap";
+    text << "stamp gap " << gap << " s exceeds warm_start_max_gap plus the "
+         << "previous set's processing (" << previous_seconds_ << " s)";
     *reason = text.str();
     return false;
   }
@@ -410,6 +414,7 @@ void FusionPipeline::process(const InputSet& set,
   stats->latency =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started)
           .count();
+  previous_seconds_ = stats->latency;
   output->stats = stats;
 }
 

@@ -681,7 +681,7 @@ TEST(Pipeline, WarmStartNeedsASmallForwardGapAndTheSameK) {
   pipeline.process(fixture.setFor(f, 1.0), nullptr, false, &out);
   pipeline.process(fixture.setFor(f, 1.1), nullptr, false, &out);
   EXPECT_TRUE(out.stats->warm_started);
-  pipeline.process(fixture.setFor(f, 1.5), nullptr, false, &out);
+  pipeline.process(fixture.setFor(f, 3.0), nullptr, false, &out);
   EXPECT_FALSE(out.stats->warm_started) << "gap above warm_start_max_gap";
   // Time going backwards resets the warm start, with a warning.
   pipeline.process(fixture.setFor(f, 0.5), nullptr, false, &out);
@@ -738,6 +738,31 @@ TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
     EXPECT_LT(out.stats->inner_iterations, 60);
     EXPECT_TRUE(out.note.empty()) << out.note;
   }
+}
+
+/// The stamp gap that the previous set's own processing opened (sets that
+/// arrive meanwhile are dropped) does not end the warm start: with
+/// warm_start_max_gap 0, a set 0.5 ms after one that took longer than that
+/// to solve (2000 iterations) still warm-starts; one 100 s later does not.
+TEST(Pipeline, TheGapOfTheProcessingItselfDoesNotEndTheWarmStart) {
+  SceneFixture fixture;
+  fixture.settings.warm_start_max_gap = 0.0;
+  fixture.settings.solver.max_total_inner_iterations = 2000;
+  fixture.settings.solver.max_outer_iterations = 100;
+  fixture.settings.solver.relative_tolerance = 0.0;
+  const test::NoisyFrame f =
+      test::noisyFrame(synthetic::renderScene(0, 64, 48), 5);
+  FusionPipeline pipeline(fixture.settings, TopicNames::defaults(2));
+  PipelineOutput out;
+  pipeline.process(fixture.setFor(f, 1.0), nullptr, false, &out);
+  EXPECT_EQ(out.stats->inner_iterations, 2000);
+  ASSERT_GT(out.stats->latency, 0.0005);
+  pipeline.process(fixture.setFor(f, 1.0005), nullptr, false, &out);
+  EXPECT_TRUE(out.stats->warm_started) << out.warning << out.note;
+  pipeline.process(fixture.setFor(f, 101.0), nullptr, false, &out);
+  EXPECT_FALSE(out.stats->warm_started);
+  EXPECT_NE(out.note.find("exceeds warm_start_max_gap"), std::string::npos)
+      << out.note;
 }
 
 TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {

@@ -63,9 +63,11 @@ struct NodeSettings {
 
   // Warm start.
   bool warm_start = true;
-  double warm_start_max_gap = 0.5;  ///< largest stamp gap to warm-start over
-  std::string fixed_frame;          ///< non-empty: rotation-compensated via tf2
-  double tf_timeout = 0.05;         ///< seconds to wait for the transform
+  /// Largest stamp gap to warm-start over, on top of the time the previous
+  /// set took to process (sets arriving meanwhile are dropped).
+  double warm_start_max_gap = 0.5;
+  std::string fixed_frame;   ///< non-empty: rotation-compensated via tf2
+  double tf_timeout = 0.05;  ///< seconds to wait for the transform
 };
 
 /// True for parameters that dynamic_reconfigure may change at run time; the

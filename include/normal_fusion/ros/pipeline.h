@@ -145,6 +145,10 @@ class FusionPipeline {
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
   bool has_previous_ = false;
   ros::Time previous_stamp_;
+  /// Wall time the previous set took (conversion, warp, solve): sets that
+  /// arrive meanwhile are dropped, so the stamp gap to the next one solved
+  /// is at least this long.
+  double previous_seconds_ = 0.0;
   CameraIntrinsics previous_K_;
   std::uint64_t frames_processed_ = 0;
 };
