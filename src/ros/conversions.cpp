@@ -292,7 +292,7 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
 
 void resampleMap(const PlanarImage& source, int width, int height,
                  Resampling method, bool is_normal_map,
-                 const std::string& topic, PlanarImage& target) {
+                 const std::string& topic, PlanarImage& target, int threads) {
   const int w = source.width(), h = source.height(), C = source.channels();
   // Same aspect ratio: (width / w) / (height / h) within 1 %.
   const double ratio =
@@ -317,6 +317,9 @@ void resampleMap(const PlanarImage& source, int width, int height,
     }
     return true;
   };
+  // Rows in parallel: each target pixel is computed alone (same values on any
+  // thread count).
+#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
   for (int y = 0; y < height; ++y) {
     // Source coordinate of the target pixel centre: v = sy (y + 0.5) - 0.5.
     const double vs = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), h - 1.0);

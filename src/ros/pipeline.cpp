@@ -1,7 +1,9 @@
 #include "normal_fusion/ros/pipeline.h"
 
+#include <omp.h>
 #include <boost/make_shared.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -217,6 +219,10 @@ void FusionPipeline::process(const InputSet& set,
                              PipelineOutput* output) {
   const auto started = std::chrono::steady_clock::now();
   output->warning.clear();
+  // Threads of the inputs' resampling: the solver's (0 = all processors).
+  const int conversion_threads = settings_.solver.num_threads > 0
+                                     ? settings_.solver.num_threads
+                                     : std::max(1, omp_get_num_procs());
   if (!set.image) throw InputError(topics_.image + ": no image in the set");
   if (!set.camera_info) {
     throw InputError(topics_.camera_info +
@@ -266,7 +272,7 @@ void FusionPipeline::process(const InputSet& set,
       normalsFromMessage(*normals_msg, topic, settings_.unit_tolerance,
                          raw_normals_[i]);
       resampleMap(raw_normals_[i], W, H, settings_.resampling, true, topic,
-                  input.normals);
+                  input.normals, conversion_threads);
     }
     const sensor_msgs::ImageConstPtr confidence_msg =
         config.use_confidence && i < static_cast<int>(set.confidence.size())
@@ -280,7 +286,7 @@ void FusionPipeline::process(const InputSet& set,
       } else {
         confidenceFromMessage(*confidence_msg, ctopic, raw_confidence_[i]);
         resampleMap(raw_confidence_[i], W, H, settings_.resampling, false,
-                    ctopic, input.confidence);
+                    ctopic, input.confidence, conversion_threads);
       }
     } else {
       input.confidence = ScalarMap();

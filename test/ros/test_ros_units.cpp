@@ -5,6 +5,7 @@
 #include <normal_fusion/NormalFusionConfig.h>
 
 #include <algorithm>
+#include <cstring>
 #include <random>
 
 #include "normal_fusion/errors.h"
@@ -383,6 +384,15 @@ TEST(Conversions, ResamplingKeepsNormalsAndRejectsAnotherAspectRatio) {
                           "/normals_1", big);
             }).find("/normals_1: a 4x3 map cannot be resampled"),
             std::string::npos);
+  // Rows on several threads: the same values (NaN where the same).
+  for (Resampling method : {Resampling::kNearest, Resampling::kBilinear}) {
+    NormalMap one, three;
+    resampleMap(small, 16, 12, method, true, "n", one, 1);
+    resampleMap(small, 16, 12, method, true, "n", three, 3);
+    ASSERT_EQ(one.pixelCount(), three.pixelCount());
+    EXPECT_EQ(0, std::memcmp(one.data(), three.data(),
+                             one.pixelCount() * 3 * sizeof(float)));
+  }
 }
 
 TEST(Conversions, OutputsCodeTheNormals) {
