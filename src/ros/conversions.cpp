@@ -290,9 +290,76 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
   return K;
 }
 
+namespace {
+
+/// Bilinear resampling of a normal map, branch-free: the source copied with
+/// its invalid normals zeroed plus a 0/1 validity plane (`masked`, 4
+/// planes), then each target pixel the bilinear sum of its four neighbours
+/// (an invalid one adds exact zeros, as if skipped), renormalized, NaN where
+/// no neighbour with weight is valid.
+void resampleNormalsBilinear(const PlanarImage& source, double sx, double sy,
+                             PlanarImage& target, int threads,
+                             PlanarImage* scratch) {
+  const int w = source.width(), h = source.height();
+  const int width = target.width(), height = target.height();
+  PlanarImage local;
+  PlanarImage& masked = scratch != nullptr ? *scratch : local;
+  masked.resize(w, h, 4);
+  const std::size_t n = source.pixelCount();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float x = source.plane(0)[i], y = source.plane(1)[i],
+                z = source.plane(2)[i];
+    const bool ok = isValidNormal(x, y, z);
+    masked.plane(0)[i] = ok ? x : 0.0f;
+    masked.plane(1)[i] = ok ? y : 0.0f;
+    masked.plane(2)[i] = ok ? z : 0.0f;
+    masked.plane(3)[i] = ok ? 1.0f : 0.0f;
+  }
+  const float* mx = masked.plane(0);
+  const float* my = masked.plane(1);
+  const float* mz = masked.plane(2);
+  const float* mv = masked.plane(3);
+#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
+  for (int y = 0; y < height; ++y) {
+    // Source coordinate of the target pixel centre: v = sy (y + 0.5) - 0.5.
+    const double vs = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), h - 1.0);
+    const int y0 = static_cast<int>(vs), y1 = std::min(y0 + 1, h - 1);
+    const float fy = static_cast<float>(vs - y0);
+    const std::size_t r0 = static_cast<std::size_t>(y0) * w;
+    const std::size_t r1 = static_cast<std::size_t>(y1) * w;
+    float* tx = target.plane(0) + static_cast<std::size_t>(y) * width;
+    float* ty = target.plane(1) + static_cast<std::size_t>(y) * width;
+    float* tz = target.plane(2) + static_cast<std::size_t>(y) * width;
+    for (int x = 0; x < width; ++x) {
+      const double us = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), w - 1.0);
+      const int x0 = static_cast<int>(us), x1 = std::min(x0 + 1, w - 1);
+      const float fx = static_cast<float>(us - x0);
+      const std::size_t i[4] = {r0 + x0, r0 + x1, r1 + x0, r1 + x1};
+      const float wk[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
+                           fx * fy};
+      float ax = 0.0f, ay = 0.0f, az = 0.0f, total = 0.0f;
+      for (int k = 0; k < 4; ++k) {
+        ax += wk[k] * mx[i[k]];
+        ay += wk[k] * my[i[k]];
+        az += wk[k] * mz[i[k]];
+        total += wk[k] * mv[i[k]];
+      }
+      // Back to unit length (the weighted mean of unit vectors is shorter).
+      const float length = std::sqrt(ax * ax + ay * ay + az * az);
+      const bool ok = total > 1e-6f && length > 1e-6f;
+      tx[x] = ok ? ax / length : kNaN;
+      ty[x] = ok ? ay / length : kNaN;
+      tz[x] = ok ? az / length : kNaN;
+    }
+  }
+}
+
+}  // namespace
+
 void resampleMap(const PlanarImage& source, int width, int height,
                  Resampling method, bool is_normal_map,
-                 const std::string& topic, PlanarImage& target, int threads) {
+                 const std::string& topic, PlanarImage& target, int threads,
+                 PlanarImage* scratch) {
   const int w = source.width(), h = source.height(), C = source.channels();
   // Same aspect ratio: (width / w) / (height / h) within 1 %.
   const double ratio =
@@ -306,6 +373,10 @@ void resampleMap(const PlanarImage& source, int width, int height,
   target.resize(width, height, C);
   const double sx = static_cast<double>(w) / width;
   const double sy = static_cast<double>(h) / height;
+  if (is_normal_map && method == Resampling::kBilinear && C == 3) {
+    resampleNormalsBilinear(source, sx, sy, target, threads, scratch);
+    return;
+  }
   const std::size_t source_pixels = source.pixelCount();
   auto valid = [&](std::size_t i) {
     if (is_normal_map) {

@@ -272,7 +272,7 @@ void FusionPipeline::process(const InputSet& set,
       normalsFromMessage(*normals_msg, topic, settings_.unit_tolerance,
                          raw_normals_[i]);
       resampleMap(raw_normals_[i], W, H, settings_.resampling, true, topic,
-                  input.normals, conversion_threads);
+                  input.normals, conversion_threads, &resample_scratch_);
     }
     const sensor_msgs::ImageConstPtr confidence_msg =
         config.use_confidence && i < static_cast<int>(set.confidence.size())

@@ -51,11 +51,13 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
 /// Nearest: the source pixel under the target pixel's centre. Bilinear: the
 /// valid source neighbours (normals: finite and non-zero; scalars: finite)
 /// weighted bilinearly; normals are renormalized; NaN where none is valid.
-/// Rows on `threads` threads (the same values on any count).
+/// Rows on `threads` threads (the same values on any count); `scratch`, if
+/// given, holds the bilinear normals' masked copy of the source (reused
+/// across calls).
 void resampleMap(const PlanarImage& source, int width, int height,
                  Resampling method, bool is_normal_map,
                  const std::string& topic, PlanarImage& target,
-                 int threads = 1);
+                 int threads = 1, PlanarImage* scratch = nullptr);
 
 /// The fused map as sensor_msgs/Image 32FC3 (x, y, z per pixel).
 void normalsToMessage(const NormalMap& normals, const std_msgs::Header& header,

@@ -143,6 +143,7 @@ class FusionPipeline {
   SolveReport report_;
   std::vector<NormalMap> raw_normals_;     ///< per input, as received
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
+  PlanarImage resample_scratch_;  ///< resampleMap()'s masked source copy
   bool has_previous_ = false;
   ros::Time previous_stamp_;
   /// Wall time the previous set took (conversion, warp, solve): sets that
