@@ -292,6 +292,21 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
 
 namespace {
 
+/// The source samples around target pixel `t` along one axis (scale = source
+/// size / target size, n = source size): the source coordinate of the target
+/// pixel's centre, scale (t + 0.5) - 0.5 clamped to [0, n - 1], split into
+/// the neighbours i0, i1 and the fraction f towards i1.
+struct Bracket {
+  double coordinate;
+  int i0, i1;
+  float f;
+};
+inline Bracket bracket(double scale, int t, int n) {
+  const double c = std::min(std::max(scale * (t + 0.5) - 0.5, 0.0), n - 1.0);
+  const int i0 = static_cast<int>(c);
+  return {c, i0, std::min(i0 + 1, n - 1), static_cast<float>(c - i0)};
+}
+
 /// Bilinear resampling of a normal map, branch-free: the source copied with
 /// its invalid normals zeroed plus a 0/1 validity plane (`masked`, 4
 /// planes), then each target pixel the bilinear sum of its four neighbours
@@ -321,20 +336,17 @@ void resampleNormalsBilinear(const PlanarImage& source, double sx, double sy,
   const float* mv = masked.plane(3);
 #pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
   for (int y = 0; y < height; ++y) {
-    // Source coordinate of the target pixel centre: v = sy (y + 0.5) - 0.5.
-    const double vs = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), h - 1.0);
-    const int y0 = static_cast<int>(vs), y1 = std::min(y0 + 1, h - 1);
-    const float fy = static_cast<float>(vs - y0);
-    const std::size_t r0 = static_cast<std::size_t>(y0) * w;
-    const std::size_t r1 = static_cast<std::size_t>(y1) * w;
+    const Bracket v = bracket(sy, y, h);
+    const float fy = v.f;
+    const std::size_t r0 = static_cast<std::size_t>(v.i0) * w;
+    const std::size_t r1 = static_cast<std::size_t>(v.i1) * w;
     float* tx = target.plane(0) + static_cast<std::size_t>(y) * width;
     float* ty = target.plane(1) + static_cast<std::size_t>(y) * width;
     float* tz = target.plane(2) + static_cast<std::size_t>(y) * width;
     for (int x = 0; x < width; ++x) {
-      const double us = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), w - 1.0);
-      const int x0 = static_cast<int>(us), x1 = std::min(x0 + 1, w - 1);
-      const float fx = static_cast<float>(us - x0);
-      const std::size_t i[4] = {r0 + x0, r0 + x1, r1 + x0, r1 + x1};
+      const Bracket u = bracket(sx, x, w);
+      const float fx = u.f;
+      const std::size_t i[4] = {r0 + u.i0, r0 + u.i1, r1 + u.i0, r1 + u.i1};
       const float wk[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
                            fx * fy};
       float ax = 0.0f, ay = 0.0f, az = 0.0f, total = 0.0f;
@@ -392,26 +404,24 @@ void resampleMap(const PlanarImage& source, int width, int height,
   // thread count).
 #pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
   for (int y = 0; y < height; ++y) {
-    // Source coordinate of the target pixel centre: v = sy (y + 0.5) - 0.5.
-    const double vs = std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), h - 1.0);
+    const Bracket v = bracket(sy, y, h);
     for (int x = 0; x < width; ++x) {
-      const double us = std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), w - 1.0);
+      const Bracket u = bracket(sx, x, w);
       const std::size_t t = static_cast<std::size_t>(y) * width + x;
       float acc[4] = {0, 0, 0, 0};
       float total = 0.0f;
       if (method == Resampling::kNearest) {
         const std::size_t i =
-            static_cast<std::size_t>(std::lround(vs)) * w + std::lround(us);
+            static_cast<std::size_t>(std::lround(v.coordinate)) * w +
+            std::lround(u.coordinate);
         if (valid(i)) {
           for (int c = 0; c < C && c < 4; ++c) acc[c] = source.plane(c)[i];
           total = 1.0f;
         }
       } else {
-        const int x0 = static_cast<int>(us), y0 = static_cast<int>(vs);
-        const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
-        const float fx = static_cast<float>(us - x0);
-        const float fy = static_cast<float>(vs - y0);
-        const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+        const float fx = u.f, fy = v.f;
+        const int xs[4] = {u.i0, u.i1, u.i0, u.i1};
+        const int ys[4] = {v.i0, v.i0, v.i1, v.i1};
         const float ws[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
                              fx * fy};
         // Bilinear weights over the valid neighbours only.
