@@ -548,22 +548,33 @@ TEST(Solver, TimeBudgetReturnsTheBestIterateSoFar) {
   EXPECT_LE(report.final_energy, report.initial_energy);
 }
 
-/// setBudgetStart(): the budget counts from the given time (work before the
-/// solve is inside it), for one solve only.
-TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
-  NormalMap gt;
-  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+/// 200 inner iterations (steps of 10, no tolerance stop) under a frame
+/// budget of 2 s: a budget that only a frame begun long ago runs out of.
+SolverSettings twoHundredIterationsUnderABudget() {
   SolverSettings settings;
   settings.time_budget_ms = 2000.0;
   settings.inner_iterations = 10;
   settings.max_total_inner_iterations = 200;
   settings.relative_tolerance = 0.0;
-  Solver solver(settings);
-  SolverState state;
-  SolveReport report;
-  // The frame began 10 s ago: its budget is spent before the solve starts.
+  return settings;
+}
+
+/// The next solve's frame began 10 s ago: its budget is spent before the
+/// solve starts.
+void spendTheFrameBudget(Solver& solver) {
   solver.setBudgetStart(std::chrono::steady_clock::now() -
                         std::chrono::seconds(10));
+}
+
+/// setBudgetStart(): the budget counts from the given time (work before the
+/// solve is inside it), for one solve only.
+TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  Solver solver(twoHundredIterationsUnderABudget());
+  SolverState state;
+  SolveReport report;
+  spendTheFrameBudget(solver);
   solver.solve(problem, state, false, report);
   EXPECT_TRUE(report.budget_exhausted);
   EXPECT_LT(report.inner_iterations, 200);
@@ -582,17 +593,10 @@ TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
 TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
-  SolverSettings settings;
-  settings.time_budget_ms = 2000.0;
-  settings.inner_iterations = 10;
-  settings.max_total_inner_iterations = 200;
-  settings.relative_tolerance = 0.0;
+  SolverSettings settings = twoHundredIterationsUnderABudget();
   Solver solver(settings);
   SolveReport report;
-  auto spent_frame = [&] {
-    solver.setBudgetStart(std::chrono::steady_clock::now() -
-                          std::chrono::seconds(10));
-  };
+  auto spent_frame = [&] { spendTheFrameBudget(solver); };
   // One-shot cold solve: the frame budget.
   SolverState one_shot;
   spent_frame();
