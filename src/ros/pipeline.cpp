@@ -409,6 +409,10 @@ void FusionPipeline::process(const InputSet& set,
   stats->initial_energy = report_.initial_energy;
   stats->final_energy = report_.final_energy;
   stats->solve_time = report_.seconds;
+  stats->prepare_time = report_.prepare_seconds;
+  stats->warm_start_time = report_.warm_start_seconds;
+  stats->refine_time = report_.refine_seconds;
+  stats->cold_start_budget_used = report_.cold_start_budget_used;
   stats->warm_started = report_.warm_started;
   stats->rotation_compensated = rotated && report_.warm_started;
   stats->converged = report_.converged;

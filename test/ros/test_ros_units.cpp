@@ -800,6 +800,7 @@ TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
   pipeline.process(fixture.setFor(f, 1.0), nullptr, false, &out);
   EXPECT_FALSE(out.stats->warm_started);
   EXPECT_FALSE(out.stats->budget_exhausted);
+  EXPECT_TRUE(out.stats->cold_start_budget_used);
   EXPECT_EQ(out.stats->inner_iterations, 60);
   EXPECT_NE(out.note.find("cold start"), std::string::npos) << out.note;
   EXPECT_NE(out.note.find("cold_start_budget_ms"), std::string::npos)
@@ -807,7 +808,15 @@ TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
   pipeline.process(fixture.setFor(f, 1.1), nullptr, false, &out);
   EXPECT_TRUE(out.stats->warm_started);
   EXPECT_TRUE(out.stats->budget_exhausted);
+  EXPECT_FALSE(out.stats->cold_start_budget_used);
   EXPECT_TRUE(out.note.empty()) << out.note;
+  // The phases of the solve: each measured, together within it.
+  EXPECT_GT(out.stats->prepare_time, 0.0);
+  EXPECT_GT(out.stats->warm_start_time, 0.0);
+  EXPECT_GE(out.stats->refine_time, 0.0);
+  EXPECT_LE(out.stats->prepare_time + out.stats->warm_start_time +
+                out.stats->refine_time,
+            out.stats->solve_time);
   // Time went backwards: the stream restarts, again under its own budget.
   pipeline.process(fixture.setFor(f, 0.5), nullptr, false, &out);
   EXPECT_FALSE(out.stats->warm_started);
