@@ -55,6 +55,21 @@ inline float huberDualScale(float len2, float w, float sigma_eps) {
   return w / std::max(std::max(w + sigma_eps, std::sqrt(len2)), kTiny);
 }
 
+/// One Huber dual step on (px, py, pz): a = p + sigma g, then
+/// p <- a w / max(w + sigma eps, |a|) (huberDualScale()). The smoothness
+/// duals take g = grad nbar and the edge weight, the data duals (with their
+/// Huber threshold) g = nbar - f, w = c and sigma eps = sigma delta.
+inline void huberDualStep(float& px, float& py, float& pz, float gx, float gy,
+                          float gz, float sigma, float w, float sigma_eps) {
+  const float ax = px + sigma * gx;
+  const float ay = py + sigma * gy;
+  const float az = pz + sigma * gz;
+  const float sc = huberDualScale(ax * ax + ay * ay + az * az, w, sigma_eps);
+  px = ax * sc;
+  py = ay * sc;
+  pz = az * sc;
+}
+
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
 /// direction, with g = next - here given as two row pointers.
 NF_MULTIVERSION
@@ -67,15 +82,10 @@ void huberDualRow(int n, float sigma, float sigma_eps,
                   const float* __restrict next_z, float* __restrict px,
                   float* __restrict py, float* __restrict pz) {
   for (int x = 0; x < n; ++x) {
-    // a = p + sigma grad nbar; p <- a w / max(w + sigma eps, |a|).
-    const float ax = px[x] + sigma * (next_x[x] - here_x[x]);
-    const float ay = py[x] + sigma * (next_y[x] - here_y[x]);
-    const float az = pz[x] + sigma * (next_z[x] - here_z[x]);
-    const float sc =
-        huberDualScale(ax * ax + ay * ay + az * az, w[x], sigma_eps);
-    px[x] = ax * sc;
-    py[x] = ay * sc;
-    pz[x] = az * sc;
+    // p <- prox(p + sigma grad nbar), grad nbar = next - here.
+    huberDualStep(px[x], py[x], pz[x], next_x[x] - here_x[x],
+                  next_y[x] - here_y[x], next_z[x] - here_z[x], sigma, w[x],
+                  sigma_eps);
   }
 }
 
@@ -108,16 +118,10 @@ void dataDualRowHuber(int n, float sigma, const float* __restrict c,
                       const float* __restrict fz, float* __restrict qx,
                       float* __restrict qy, float* __restrict qz) {
   for (int x = 0; x < n; ++x) {
-    // a = q + sigma (nbar - f); q <- a c / max(c + sigma delta, |a|) (the
-    // shrink by c / (c + sigma delta) and the clamp to c in one division).
-    const float ax = qx[x] + sigma * (nx[x] - fx[x]);
-    const float ay = qy[x] + sigma * (ny[x] - fy[x]);
-    const float az = qz[x] + sigma * (nz[x] - fz[x]);
-    const float sc =
-        huberDualScale(ax * ax + ay * ay + az * az, c[x], sigma * delta[x]);
-    qx[x] = ax * sc;
-    qy[x] = ay * sc;
-    qz[x] = az * sc;
+    // q <- prox(q + sigma (nbar - f)): the shrink by c / (c + sigma delta)
+    // and the clamp to c in one division.
+    huberDualStep(qx[x], qy[x], qz[x], nx[x] - fx[x], ny[x] - fy[x],
+                  nz[x] - fz[x], sigma, c[x], sigma * delta[x]);
   }
 }
 
@@ -382,14 +386,8 @@ void linkDualsIndexed(int num_links, float sigma, float sigma_eps,
                       float* __restrict px, float* __restrict py,
                       float* __restrict pz) {
   for (int m = 0; m < num_links; ++m) {
-    const float ax = px[m] + sigma * (nx[b[m]] - nx[a[m]]);
-    const float ay = py[m] + sigma * (ny[b[m]] - ny[a[m]]);
-    const float az = pz[m] + sigma * (nz[b[m]] - nz[a[m]]);
-    const float sc =
-        huberDualScale(ax * ax + ay * ay + az * az, w[m], sigma_eps);
-    px[m] = ax * sc;
-    py[m] = ay * sc;
-    pz[m] = az * sc;
+    huberDualStep(px[m], py[m], pz[m], nx[b[m]] - nx[a[m]], ny[b[m]] - ny[a[m]],
+                  nz[b[m]] - nz[a[m]], sigma, w[m], sigma_eps);
   }
 }
 
@@ -404,14 +402,8 @@ void linkDualsFirstContiguous(
     const float* __restrict nz, float* __restrict px, float* __restrict py,
     float* __restrict pz) {
   for (int m = 0; m < num_links; ++m) {
-    const float ax = px[m] + sigma * (nx[b[m]] - ax_[m]);
-    const float ay = py[m] + sigma * (ny[b[m]] - ay_[m]);
-    const float az = pz[m] + sigma * (nz[b[m]] - az_[m]);
-    const float sc =
-        huberDualScale(ax * ax + ay * ay + az * az, w[m], sigma_eps);
-    px[m] = ax * sc;
-    py[m] = ay * sc;
-    pz[m] = az * sc;
+    huberDualStep(px[m], py[m], pz[m], nx[b[m]] - ax_[m], ny[b[m]] - ay_[m],
+                  nz[b[m]] - az_[m], sigma, w[m], sigma_eps);
   }
 }
 
