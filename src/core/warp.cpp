@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "normal_fusion/detail/multiversion.h"
+#include "normal_fusion/detail/previous_pixel.h"
 #include "normal_fusion/errors.h"
 
 namespace normal_fusion {
@@ -69,68 +70,12 @@ bool blendable(const PlanarImage& normals, double u, double v) {
 /// normals.
 void checkWarpArguments(const SolverState& state,
                         const std::array<double, 9>& R) {
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      double d = 0.0;
-      for (int k = 0; k < 3; ++k) d += R[3 * i + k] * R[3 * j + k];
-      if (!std::isfinite(d) || std::abs(d - (i == j ? 1.0 : 0.0)) > 1e-4) {
-        throw InputError("warpStateByRotation: R is not a rotation matrix");
-      }
-    }
-  }
+  internal::checkRotation(R, "warpStateByRotation");
   if (state.normals.channels() != 3 || state.normals.width() == 0 ||
       state.normals.height() == 0) {
     throw InputError("warpStateByRotation: the state holds no normals");
   }
 }
-
-/// Where a current pixel comes from in the previous image: u_prev ~ K R^T
-/// K^-1 u_cur, the homography of a camera that rotated by R.
-class PreviousPixel {
- public:
-  PreviousPixel(const CameraIntrinsics& K, const std::array<double, 9>& R) {
-    const std::array<double, 9> K_inv = K.inverse();
-    // A = K R^T K^-1.
-    double RtKinv[9];
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) {
-        RtKinv[3 * i + j] =
-            R[i] * K_inv[j] + R[3 + i] * K_inv[3 + j] + R[6 + i] * K_inv[6 + j];
-      }
-    }
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) {
-        A_[3 * i + j] = K.K[3 * i] * RtKinv[j] +
-                        K.K[3 * i + 1] * RtKinv[3 + j] +
-                        K.K[3 * i + 2] * RtKinv[6 + j];
-      }
-    }
-  }
-
-  /// The previous pixel (u, v) of pixel (x, y); false when it lies outside
-  /// the previous W x H image (or behind the camera). Positions within 1e-6
-  /// of the border count as on it (rounding of an identity warp).
-  bool at(int x, int y, int W, int H, double* u, double* v) const {
-    const double w = A_[6] * x + A_[7] * y + A_[8];
-    if (!(w > 1e-9)) return false;
-    const double inv_w = 1.0 / w;
-    *u = clampNear((A_[0] * x + A_[1] * y + A_[2]) * inv_w, W - 1.0);
-    *v = clampNear((A_[3] * x + A_[4] * y + A_[5]) * inv_w, H - 1.0);
-    return *u >= 0.0 && *v >= 0.0 && *u <= W - 1.0 && *v <= H - 1.0;
-  }
-
-  /// A = K R^T K^-1, row-major.
-  const double* matrix() const { return A_; }
-
-  static double clampNear(double t, double high) {
-    constexpr double kSlack = 1e-6;
-    const double low_clamped = (t < 0.0) & (t > -kSlack) ? 0.0 : t;
-    return (t > high) & (t < high + kSlack) ? high : low_clamped;
-  }
-
- private:
-  double A_[9];
-};
 
 /// Bilinear blend of one component from its four corners (weights tx, ty).
 inline float blendCorners(float p00, float p01, float p10, float p11, float tx,
@@ -163,8 +108,8 @@ inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
 constexpr int kChunk = 64;
 
 /// Where a chunk of at most kChunk pixels of one row comes from, and their
-/// warped normals: PreviousPixel::at() and blendable() per pixel, then
-/// bilinearRotate()'s blend, in three passes without branches that GCC
+/// warped normals: internal::PreviousPixel::at() and blendable() per pixel,
+/// then bilinearRotate()'s blend, in three passes without branches that GCC
 /// vectorises (positions; the corners' normals gathered; blend test, blend,
 /// rotation and normalization). Writes n_cur (NaN where no prediction) and,
 /// per pixel, the source's first corner (-1: none), its steps to the right
@@ -183,17 +128,17 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
   // inside the previous image.
   int at0[kChunk], at1[kChunk], at2[kChunk], at3[kChunk];
   double in_flag[kChunk];  // 1: inside the previous image
-  // PreviousPixel::at(), in double; the positions outside replaced by (0, 0)
-  // (safe indices; their prediction is dropped below).
+  // internal::PreviousPixel::at(), in double; the positions outside replaced by
+  // (0, 0) (safe indices; their prediction is dropped below).
   double u_safe[kChunk], v_safe[kChunk];
   for (int j = 0; j < count; ++j) {
     const double x = x_begin + j;
     const double w = A[6] * x + A[7] * y + A[8];
     const double inv_w = 1.0 / w;
-    const double u =
-        PreviousPixel::clampNear((A[0] * x + A[1] * y + A[2]) * inv_w, W - 1.0);
-    const double v =
-        PreviousPixel::clampNear((A[3] * x + A[4] * y + A[5]) * inv_w, H - 1.0);
+    const double u = internal::PreviousPixel::clampNear(
+        (A[0] * x + A[1] * y + A[2]) * inv_w, W - 1.0);
+    const double v = internal::PreviousPixel::clampNear(
+        (A[3] * x + A[4] * y + A[5]) * inv_w, H - 1.0);
     const bool in = (w > 1e-9) && (u >= 0.0) && (v >= 0.0) && (u <= W - 1.0) &&
                     (v <= H - 1.0);
     u_safe[j] = in ? u : 0.0;
@@ -283,7 +228,7 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                          DualWarp dual_warp) {
   const auto& R = R_cur_prev;
   checkWarpArguments(state, R);
-  const PreviousPixel previous(K, R);
+  const internal::PreviousPixel previous(K, R);
   const int W = state.normals.width(), H = state.normals.height();
   const std::size_t N = state.normals.pixelCount();
   const int L = static_cast<int>(state.dual_data.size());
@@ -377,7 +322,7 @@ void warpStateByRotationReference(SolverState& state, const CameraIntrinsics& K,
     warped.dual_v.resize(W, H, 3);
     warped.dual_data.assign(L, PlanarImage(W, H, 3));
   }
-  const PreviousPixel previous(K, R);
+  const internal::PreviousPixel previous(K, R);
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       float n[3];

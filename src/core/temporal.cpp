@@ -1,0 +1,169 @@
+#include "normal_fusion/temporal.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+#include "normal_fusion/detail/previous_pixel.h"
+#include "normal_fusion/errors.h"
+
+namespace normal_fusion {
+
+void TemporalSettings::validate() const {
+  if (frames < 0) {
+    throw ParameterError("setting temporal_frames = " + std::to_string(frames) +
+                         ": expected >= 0 (0 or 1 = off)");
+  }
+  if (!(gate_degrees > 0.0 && gate_degrees <= 180.0)) {
+    throw ParameterError(
+        "setting temporal_gate_deg = " + std::to_string(gate_degrees) +
+        ": expected in (0, 180]");
+  }
+}
+
+void TemporalAverage::reset() {
+  for (History& history : histories_) history.count.fill(0.0f);
+}
+
+int TemporalAverage::count(int l, int i) const {
+  if (l < 0 || l >= static_cast<int>(histories_.size())) return 0;
+  const ScalarMap& count = histories_[l].count;
+  if (i < 0 || static_cast<std::size_t>(i) >= count.pixelCount()) return 0;
+  return static_cast<int>(count.plane(0)[i]);
+}
+
+void TemporalAverage::apply(std::vector<NormalInput>& inputs,
+                            const CameraIntrinsics& K,
+                            const std::array<double, 9>* R_cur_prev,
+                            const TemporalSettings& settings, int num_threads) {
+  settings.validate();
+  if (!settings.enabled()) return;
+  if (R_cur_prev != nullptr) {
+    internal::checkRotation(*R_cur_prev, "TemporalAverage");
+  }
+  const internal::PreviousPixel previous(
+      K, R_cur_prev != nullptr
+             ? *R_cur_prev
+             : std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1});
+  const int threads =
+      num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
+  const int L = static_cast<int>(inputs.size());
+  for (int l = 0; l < L; ++l) {
+    if (inputs[l].normals.channels() != 3) {
+      throw InputError(
+          "TemporalAverage: input " + std::to_string(l) + " holds " +
+          std::to_string(inputs[l].normals.channels()) + " planes; expected 3");
+    }
+  }
+  if (static_cast<int>(histories_.size()) != L) {
+    histories_.resize(L);
+    reset();
+  }
+  const float max_count = static_cast<float>(settings.frames);
+  const float cos_gate =
+      static_cast<float>(std::cos(settings.gate_degrees * M_PI / 180.0));
+  for (int l = 0; l < L; ++l) {
+    NormalMap& samples = inputs[l].normals;
+    History& h = histories_[l];
+    const int W = samples.width(), H = samples.height();
+    if (h.average.width() != W || h.average.height() != H) {
+      h.average.resize(W, H, 3);
+      h.count.resize(W, H, 1);
+      h.count.fill(0.0f);
+    }
+    if (R_cur_prev != nullptr) {
+      // The rotation in the input's frame: the solver reads n_optical = M
+      // n_input, so an input-frame vector turns by M^T R M.
+      const auto& M = inputs[l].orientation.M;
+      const auto& R = *R_cur_prev;
+      float R_in[9];
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          double sum = 0.0;
+          for (int a = 0; a < 3; ++a) {
+            for (int b = 0; b < 3; ++b) {
+              sum += M[3 * a + i] * R[3 * a + b] * M[3 * b + j];
+            }
+          }
+          R_in[3 * i + j] = static_cast<float>(sum);
+        }
+      }
+      h.scratch_average.resize(W, H, 3);
+      h.scratch_count.resize(W, H, 1);
+      // Carry: the average of the nearest previous pixel, rotated.
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          const long i = static_cast<long>(y) * W + x;
+          double u = 0.0, v = 0.0;
+          float carried = 0.0f;
+          float a[3] = {0.0f, 0.0f, 0.0f};
+          if (previous.at(x, y, W, H, &u, &v)) {
+            const long j = std::lround(v) * W + std::lround(u);
+            carried = h.count.plane(0)[j];
+            if (carried > 0.0f) {
+              const float s[3] = {h.average.plane(0)[j], h.average.plane(1)[j],
+                                  h.average.plane(2)[j]};
+              for (int r = 0; r < 3; ++r) {
+                a[r] = R_in[3 * r] * s[0] + R_in[3 * r + 1] * s[1] +
+                       R_in[3 * r + 2] * s[2];
+              }
+            }
+          }
+          for (int c = 0; c < 3; ++c) h.scratch_average.plane(c)[i] = a[c];
+          h.scratch_count.plane(0)[i] = carried;
+        }
+      }
+      std::swap(h.average, h.scratch_average);
+      std::swap(h.count, h.scratch_count);
+    }
+    // Blend: each valid sample into its pixel's average, which the input
+    // then holds.
+    const long N = static_cast<long>(W) * H;
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (long i = 0; i < N; ++i) {
+      float f[3] = {samples.plane(0)[i], samples.plane(1)[i],
+                    samples.plane(2)[i]};
+      if (!isValidNormal(f[0], f[1], f[2])) continue;
+      const float inv_f =
+          1.0f / std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+      for (float& c : f) c *= inv_f;
+      float& count = h.count.plane(0)[i];
+      const float a[3] = {h.average.plane(0)[i], h.average.plane(1)[i],
+                          h.average.plane(2)[i]};
+      float next[3];
+      if (count > 0.0f && a[0] * f[0] + a[1] * f[1] + a[2] * f[2] >= cos_gate) {
+        // Within the gate: the running mean, exponential past `frames`.
+        count = std::min(count + 1.0f, max_count);
+        const float w = 1.0f / count;
+        float m[3], norm2 = 0.0f;
+        for (int c = 0; c < 3; ++c) {
+          m[c] = (1.0f - w) * a[c] + w * f[c];
+          norm2 += m[c] * m[c];
+        }
+        // |m| >= cos(gate / 2) > 0 for a gate of at most 180 degrees, except
+        // for exactly opposite vectors, which then restart the average.
+        if (norm2 > 1e-12f) {
+          const float inv = 1.0f / std::sqrt(norm2);
+          for (int c = 0; c < 3; ++c) next[c] = m[c] * inv;
+        } else {
+          count = 1.0f;
+          for (int c = 0; c < 3; ++c) next[c] = f[c];
+        }
+      } else {
+        // No average here yet, or the sample left the gate: a new one.
+        count = 1.0f;
+        for (int c = 0; c < 3; ++c) next[c] = f[c];
+      }
+      for (int c = 0; c < 3; ++c) {
+        h.average.plane(c)[i] = next[c];
+        samples.plane(c)[i] = next[c];
+      }
+    }
+  }
+}
+
+}  // namespace normal_fusion
