@@ -95,6 +95,9 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.flag("warm_start", s.warm_start);
   v.real("warm_start_max_gap", s.warm_start_max_gap, 0.0, 1e6);
   v.text("fixed_frame", s.fixed_frame);
+  // Temporal averaging of the inputs.
+  v.integer("temporal_frames", s.temporal.frames, 0, 100000);
+  v.real("temporal_gate_deg", s.temporal.gate_degrees, 0.1, 180.0);
   v.real("tf_timeout", s.tf_timeout, 0.0, 10.0);
 }
 

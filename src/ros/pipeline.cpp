@@ -9,6 +9,7 @@
 #include <limits>
 #include <sstream>
 
+#include "normal_fusion/detail/previous_pixel.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/warp.h"
@@ -179,6 +180,8 @@ void FusionPipeline::setSettings(const NodeSettings& settings) {
 void FusionPipeline::resetWarmStart() {
   has_previous_ = false;
   state_.clear();
+  temporal_.reset();
+  averages_current_ = false;
 }
 
 bool FusionPipeline::canWarmStart(const CameraIntrinsics& K,
@@ -315,23 +318,29 @@ void FusionPipeline::process(const InputSet& set,
   // start asked for without a usable state), since the warm frames after it
   // carry its map on. A rotation that cannot be looked up is a one-frame
   // failure instead: that frame is cold-started under the frame budget.
+  // The inputs' temporal averages follow the same stream: carried by the
+  // same rotation, restarted where the warm start would be.
   bool stream_start = false;
   output->note.clear();
-  if (settings_.warm_start && !canWarmStart(problem_.K, stamp, &reason)) {
-    stream_start = true;
-    state_.clear();
-  } else if (settings_.warm_start) {
-    warm = true;
-    if (!settings_.fixed_frame.empty()) {
-      std::array<double, 9> R_cur_prev{};
-      std::string why;
-      if (!rotation) {
-        why = "no transform source";
-      } else if (frame_id.empty()) {
-        why = "the image has no frame_id";
-      } else if (rotation(frame_id, previous_stamp_, stamp, &R_cur_prev,
-                          &why)) {
-        try {
+  const bool averaging = settings_.temporal.enabled();
+  bool continuous = false;  // this set continues the previous set's stream
+  if (settings_.warm_start || averaging) {
+    continuous = canWarmStart(problem_.K, stamp, &reason);
+    if (!continuous && settings_.warm_start) {
+      stream_start = true;
+      state_.clear();
+    }
+  }
+  std::array<double, 9> R_cur_prev{};
+  if (continuous && !settings_.fixed_frame.empty()) {
+    std::string why;
+    if (!rotation) {
+      why = "no transform source";
+    } else if (frame_id.empty()) {
+      why = "the image has no frame_id";
+    } else if (rotation(frame_id, previous_stamp_, stamp, &R_cur_prev, &why)) {
+      try {
+        if (settings_.warm_start) {
           // With the local refinement the duals are reset (as good, and
           // cheaper: see DualWarp).
           warpStateByRotation(state_, problem_.K, R_cur_prev, warp_scratch_,
@@ -339,18 +348,47 @@ void FusionPipeline::process(const InputSet& set,
                               solver_.settings().warm_refine_iterations > 0
                                   ? DualWarp::kReset
                                   : DualWarp::kRotate);
-          rotated = true;
-        } catch (const Error& e) {
-          why = e.what();
+        } else {
+          internal::checkRotation(R_cur_prev, "the transform");
         }
-      }
-      if (!rotated) {
-        warm = false;
-        output->warning = "rotation of '" + frame_id + "' relative to '" +
-                          settings_.fixed_frame + "' unknown (" + why +
-                          "): cold start";
+        rotated = true;
+      } catch (const Error& e) {
+        why = e.what();
       }
     }
+    if (!rotated) {
+      output->warning = "rotation of '" + frame_id + "' relative to '" +
+                        settings_.fixed_frame + "' unknown (" + why + "): ";
+      if (settings_.warm_start) output->warning += "cold start";
+      if (settings_.warm_start && averaging) output->warning += ", ";
+      if (averaging) output->warning += "input averages restarted";
+    }
+  }
+  // Aligned with the previous set: by the rotation, or assumed still when no
+  // fixed_frame is given.
+  const bool aligned = continuous && (settings_.fixed_frame.empty() || rotated);
+  warm = settings_.warm_start && aligned;
+  double average_seconds = 0.0;
+  // This set's samples join the previous sets' averages (else they restart).
+  const bool joined = averaging && aligned && averages_current_;
+  if (averaging) {
+    const auto average_start = std::chrono::steady_clock::now();
+    // Averages left from before averaging was last turned off are stale.
+    if (!joined) temporal_.reset();
+    try {
+      temporal_.apply(problem_.inputs, problem_.K,
+                      rotated ? &R_cur_prev : nullptr, settings_.temporal,
+                      conversion_threads);
+    } catch (...) {
+      resetWarmStart();
+      throw;
+    }
+    averages_current_ = true;
+    average_seconds = std::chrono::duration<double>(
+                          std::chrono::steady_clock::now() - average_start)
+                          .count();
+  } else {
+    averages_current_ = false;
   }
 
   try {
@@ -413,6 +451,8 @@ void FusionPipeline::process(const InputSet& set,
   stats->warm_start_time = report_.warm_start_seconds;
   stats->refine_time = report_.refine_seconds;
   stats->cold_start_budget_used = report_.cold_start_budget_used;
+  stats->input_average_time = average_seconds;
+  stats->inputs_averaged = joined;
   stats->warm_started = report_.warm_started;
   stats->rotation_compensated = rotated && report_.warm_started;
   stats->converged = report_.converged;

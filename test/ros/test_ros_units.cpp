@@ -907,6 +907,99 @@ TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
   EXPECT_NE(out.warning.find("no transform"), std::string::npos);
 }
 
+/// Temporal averaging of the inputs (temporal_frames): a still camera's noisy
+/// sets averaged give a better map than the same stream without; the
+/// averages follow the stream (restart on a gap, and on an unknown rotation,
+/// with a warning that says so) and run with warm starts off too.
+TEST(Pipeline, TemporalAveragingFollowsTheStream) {
+  const synthetic::Frame frame = synthetic::renderScene(0, 96, 72);
+  SceneFixture plain_fixture, averaged_fixture;
+  averaged_fixture.settings.temporal.frames = 8;
+  FusionPipeline plain(plain_fixture.settings, TopicNames::defaults(2));
+  FusionPipeline averaged(averaged_fixture.settings, TopicNames::defaults(2));
+  PipelineOutput plain_out, averaged_out;
+  for (int k = 0; k < 8; ++k) {
+    const test::NoisyFrame f = test::noisyFrame(frame, 40 + k);
+    const double stamp = 1.0 + 0.033 * k;
+    plain.process(plain_fixture.setFor(f, stamp), nullptr, false, &plain_out);
+    averaged.process(averaged_fixture.setFor(f, stamp), nullptr, false,
+                     &averaged_out);
+    EXPECT_EQ(averaged_out.stats->inputs_averaged, k > 0) << "set " << k;
+    EXPECT_FALSE(plain_out.stats->inputs_averaged);
+    EXPECT_EQ(plain_out.stats->input_average_time, 0.0);
+    EXPECT_GT(averaged_out.stats->input_average_time, 0.0);
+  }
+  const double p_plain =
+      psnr(test::normalsFromImage(*plain_out.fused), frame.normals_gt);
+  const double p_averaged =
+      psnr(test::normalsFromImage(*averaged_out.fused), frame.normals_gt);
+  EXPECT_GT(p_averaged, p_plain + 1.0)
+      << "plain " << p_plain << " dB, averaged " << p_averaged << " dB";
+  // Turned off for a set and on again: the old averages are not used.
+  NodeSettings off = averaged_fixture.settings;
+  off.temporal.frames = 0;
+  averaged.setSettings(off);
+  averaged.process(averaged_fixture.setFor(test::noisyFrame(frame, 58), 1.3),
+                   nullptr, false, &averaged_out);
+  EXPECT_FALSE(averaged_out.stats->inputs_averaged);
+  averaged.setSettings(averaged_fixture.settings);
+  averaged.process(averaged_fixture.setFor(test::noisyFrame(frame, 59), 1.333),
+                   nullptr, false, &averaged_out);
+  EXPECT_FALSE(averaged_out.stats->inputs_averaged) << "stale averages used";
+  EXPECT_TRUE(averaged_out.stats->warm_started);
+  // A gap ends the stream: the averages restart with the warm start.
+  averaged.process(averaged_fixture.setFor(test::noisyFrame(frame, 60), 9.0),
+                   nullptr, false, &averaged_out);
+  EXPECT_FALSE(averaged_out.stats->inputs_averaged);
+  EXPECT_FALSE(averaged_out.stats->warm_started);
+
+  // Warm starts off: every set cold-started, the inputs still averaged.
+  SceneFixture cold_fixture;
+  cold_fixture.settings.warm_start = false;
+  cold_fixture.settings.temporal.frames = 8;
+  FusionPipeline cold(cold_fixture.settings, TopicNames::defaults(2));
+  PipelineOutput cold_out;
+  for (int k = 0; k < 3; ++k) {
+    cold.process(
+        cold_fixture.setFor(test::noisyFrame(frame, 70 + k), 1.0 + 0.033 * k),
+        nullptr, false, &cold_out);
+    EXPECT_FALSE(cold_out.stats->warm_started);
+    EXPECT_EQ(cold_out.stats->inputs_averaged, k > 0) << "set " << k;
+  }
+
+  // With a fixed frame, a rotation that cannot be looked up restarts them.
+  SceneFixture tf_fixture;
+  tf_fixture.settings.fixed_frame = "world";
+  tf_fixture.settings.temporal.frames = 8;
+  FusionPipeline tf(tf_fixture.settings, TopicNames::defaults(2));
+  PipelineOutput tf_out;
+  RotationLookup identity = [](const std::string&, const ros::Time&,
+                               const ros::Time&, std::array<double, 9>* R,
+                               std::string*) {
+    *R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    return true;
+  };
+  RotationLookup failing = [](const std::string&, const ros::Time&,
+                              const ros::Time&, std::array<double, 9>*,
+                              std::string* reason) {
+    *reason = "no transform";
+    return false;
+  };
+  tf.process(tf_fixture.setFor(test::noisyFrame(frame, 80), 1.0), identity,
+             false, &tf_out);
+  tf.process(tf_fixture.setFor(test::noisyFrame(frame, 81), 1.033), identity,
+             false, &tf_out);
+  EXPECT_TRUE(tf_out.stats->inputs_averaged);
+  EXPECT_TRUE(tf_out.stats->rotation_compensated);
+  tf.process(tf_fixture.setFor(test::noisyFrame(frame, 82), 1.066), failing,
+             false, &tf_out);
+  EXPECT_FALSE(tf_out.stats->inputs_averaged);
+  EXPECT_NE(tf_out.warning.find("input averages restarted"), std::string::npos)
+      << tf_out.warning;
+  EXPECT_NE(tf_out.warning.find("cold start"), std::string::npos)
+      << tf_out.warning;
+}
+
 TEST(Pipeline, RotationLookupInATfBufferGivesTheCameraRotation) {
   const auto frames = synthetic::renderSequence(0, 32, 24, 2, 5.0, 10.0);
   tf2::BufferCore buffer;

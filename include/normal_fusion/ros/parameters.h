@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "normal_fusion/settings.h"
+#include "normal_fusion/temporal.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
@@ -68,6 +69,10 @@ struct NodeSettings {
   double warm_start_max_gap = 0.5;
   std::string fixed_frame;   ///< non-empty: rotation-compensated via tf2
   double tf_timeout = 0.05;  ///< seconds to wait for the transform
+
+  /// Each input averaged over the stream's frames before the solve (carried
+  /// by the same rotation as the warm start); frames <= 1 = off.
+  TemporalSettings temporal;
 };
 
 /// True for parameters that dynamic_reconfigure may change at run time; the

@@ -144,6 +144,9 @@ class FusionPipeline {
   std::vector<NormalMap> raw_normals_;     ///< per input, as received
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
   PlanarImage resample_scratch_;  ///< resampleMap()'s masked source copy
+  TemporalAverage temporal_;      ///< the inputs' averages over time
+  /// The averages were updated with the previous set (averaging was on).
+  bool averages_current_ = false;
   bool has_previous_ = false;
   ros::Time previous_stamp_;
   /// Wall time the previous set took (conversion, warp, solve): sets that
