@@ -12,6 +12,7 @@
 // on (whole image, no budget) for N1, N2, ... more inner iterations at most:
 // how much whole-image work a frame would need to match the cold solve.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -27,6 +28,7 @@
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/synthetic.h"
+#include "normal_fusion/temporal.h"
 #include "normal_fusion/warp.h"
 
 namespace nf = normal_fusion;
@@ -107,6 +109,10 @@ int main(int argc, char** argv) {
   // --cold-start-budget-ms X: SolverSettings::cold_start_budget_ms of the
   // live settings (default: the solver's, none).
   double cold_start_budget_ms = -1.0;
+  // --temporal-frames N, --temporal-gate-deg G: the live frames' inputs
+  // averaged over time (TemporalSettings; default off). The converged cold
+  // solve of each frame keeps the frame's own inputs.
+  nf::TemporalSettings temporal;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
@@ -142,6 +148,10 @@ int main(int argc, char** argv) {
       reset_duals = value != 0.0 ? 1 : 0;
     else if (key == "--cold-start-budget-ms")
       cold_start_budget_ms = value;
+    else if (key == "--temporal-frames")
+      temporal.frames = static_cast<int>(value);
+    else if (key == "--temporal-gate-deg")
+      temporal.gate_degrees = value;
     else if (key == "--startup") {
       const std::string mode = argv[i + 1];
       if (mode != "converged" && mode != "live") {
@@ -203,13 +213,22 @@ int main(int argc, char** argv) {
       "per frame (warp + solve), "
       "%d inner iterations per frame (0: by the budget), local refinement of "
       "the warm start %d iterations at most, %d threads%s, %d busy threads "
-      "beside it, adaptive refinement threads %s, OMP_WAIT_POLICY %s\n",
+      "beside it, adaptive refinement threads %s, OMP_WAIT_POLICY %s, ",
       scene, width, height, still ? 0.0 : degrees_per_frame,
       live.time_budget_ms, iterations, live.warm_refine_iterations, threads,
       still ? ", camera still" : "", busy_threads,
       adaptive_threads == 1 ? "on" : "off",
       std::getenv("OMP_WAIT_POLICY") != nullptr ? std::getenv("OMP_WAIT_POLICY")
                                                 : "unset");
+  temporal.validate();
+  if (temporal.enabled()) {
+    std::printf(
+        "live inputs averaged over time (%d frames, gate %.0f deg; its time "
+        "counts in the frame's budget and the warp column)\n",
+        temporal.frames, temporal.gate_degrees);
+  } else {
+    std::printf("live inputs: each frame's own\n");
+  }
   std::printf(
       "| frame | frame ms | warp ms | solve ms | prepare ms | warm start ms | "
       "refine ms | whole-image its (outer steps / rejected) | refined px | "
@@ -239,6 +258,7 @@ int main(int argc, char** argv) {
     });
   }
   nf::Solver live_solver(live);
+  nf::TemporalAverage temporal_average;
   nf::Solver reference_solver(converged);
   nf::SolverState state, warp_scratch;
   nf::SolveReport report;
@@ -248,13 +268,28 @@ int main(int argc, char** argv) {
       sum_continued(continue_caps.size(), 0.0);
   for (int k = 0; k <= frames; ++k) {
     const nf::FusionProblem problem = makeProblem(sequence[k], k);
+    // The live solver's problem: the frame's inputs, averaged over time
+    // with --temporal-frames (the cold solves keep the frame's own).
+    nf::FusionProblem live_problem = problem;
+    const std::array<double, 9> R_cur_prev =
+        k == 0 ? std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1}
+               : nf::synthetic::relativeRotation(sequence[k].pose,
+                                                 sequence[k - 1].pose);
+    const auto average_start = std::chrono::steady_clock::now();
+    temporal_average.apply(live_problem.inputs, problem.K,
+                           k == 0 ? nullptr : &R_cur_prev, temporal, threads);
+    const double average_ms =
+        std::chrono::duration<double, std::milli>(
+            std::chrono::steady_clock::now() - average_start)
+            .count();
     if (k == 0) {
       // Start-up frame: solved to convergence before the stream starts (or,
       // with --startup live, as a stream's first frame with the live
       // settings), by the live solver itself, so that its buffers exist once
       // the stream runs (steady state).
       live_solver.setSettings(startup);
-      live_solver.solve(problem, state, /*warm_start=*/startup_live, report);
+      live_solver.solve(live_problem, state, /*warm_start=*/startup_live,
+                        report);
       std::printf(
           "# start-up frame: %s, %d inner iterations (%d on coarser levels), "
           "%.0f ms%s\n",
@@ -266,16 +301,16 @@ int main(int argc, char** argv) {
       warp_scratch.resize(width, height, 2);
       continue;
     }
-    const auto R_cur_prev =
-        nf::synthetic::relativeRotation(sequence[k].pose, sequence[k - 1].pose);
     const auto warp_start = std::chrono::steady_clock::now();
     // As the node does: with the local refinement, the duals are reset.
     nf::warpStateByRotation(
         state, problem.K, R_cur_prev, warp_scratch, threads,
         reset_duals == 1 ? nf::DualWarp::kReset : nf::DualWarp::kRotate);
-    const double warp_ms = std::chrono::duration<double, std::milli>(
-                               std::chrono::steady_clock::now() - warp_start)
-                               .count();
+    // The inputs' averaging counts as part of the warp.
+    const double warp_ms =
+        average_ms + std::chrono::duration<double, std::milli>(
+                         std::chrono::steady_clock::now() - warp_start)
+                         .count();
     // What the warm start predicts (uncovered pixels skipped), and the same
     // warp applied to the previous frame's exact normals: the floor a
     // rotation-only warp leaves (edge blending, and the camera's translation,
@@ -292,7 +327,7 @@ int main(int argc, char** argv) {
     live_solver.setBudgetStart(
         start - std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                     std::chrono::duration<double, std::milli>(warp_ms)));
-    live_solver.solve(problem, state, warm_start, report);
+    live_solver.solve(live_problem, state, warm_start, report);
     const double solve_ms = std::chrono::duration<double, std::milli>(
                                 std::chrono::steady_clock::now() - start)
                                 .count();

@@ -3,7 +3,7 @@
 // ximgproc: joint bilateral, guided, fast global smoother, domain transform),
 // each filter at its best setting of a small grid for each case.
 //
-//   evaluate --output-dir DIR [--cases paper,depth,fusion,castle]
+//   evaluate --output-dir DIR [--cases paper,depth,fusion,castle,stream]
 //            [--width 320 --height 240] [--scenes 0,1,2] [--quick]
 //            [solver options]
 //
@@ -11,7 +11,10 @@
 // synthetic scenes), "depth" (normals of a noisy depth map: structured noise,
 // dropout), "fusion" (a dense noisy input with a sparse accurate one) and
 // "castle" (ViSP's synthetic Castle sequence: normals of its depth maps with
-// depth-camera noise, ground truth from its piecewise-planar model).
+// depth-camera noise, ground truth from its piecewise-planar model) and
+// "stream" (consecutive frames of a moving camera, new noise in each: each
+// frame solved alone, the warm-started stream, and both on the inputs
+// averaged over time; a synthetic sequence and Castle's frames).
 //
 // Writes DIR/results.md (the tables, also printed to stdout),
 // DIR/results.csv (per scene), DIR/filter_grid.csv (every filter setting),
@@ -54,7 +57,9 @@
 #include "normal_fusion/solver.h"
 #include "normal_fusion/solver_options.h"
 #include "normal_fusion/synthetic.h"
+#include "normal_fusion/temporal.h"
 #include "normal_fusion/types.h"
+#include "normal_fusion/warp.h"
 
 namespace {
 
@@ -99,6 +104,7 @@ struct Options {
   bool run_depth = true;
   bool run_fusion = true;
   bool run_castle = true;
+  bool run_stream = true;
   // Depth-camera noise (depth and castle cases, depth input of the fusion).
   double depth_sigma_at_1m = 0.0015;
   double depth_dropout = 0.02;
@@ -112,6 +118,10 @@ struct Options {
   std::string castle_dir = nf::castle::kDefaultDirectory;
   int castle_frames = 5;  ///< 0: by --quick
   double castle_tolerance_m = nf::castle::LoadSettings().agreement_tolerance_m;
+  // Streams.
+  int stream_frames = 12;  ///< per sequence; 0: by --quick
+  double stream_sigma = 0.4;
+  nf::TemporalSettings temporal{20, 60.0};
   bool help = false;
 };
 
@@ -177,6 +187,15 @@ void printUsage(std::ostream& out) {
       << "\n"
          "Solver options (defaults in brackets):\n";
   nf::cli::printSolverOptions(out, nf::SolverSettings());
+  out << "  --stream-frames N     consecutive frames of each stream sequence ["
+      << o.stream_frames << "; 5 with --quick]\n"
+      << "  --stream-sigma X      paper noise of the streams' first input ["
+      << o.stream_sigma << "]\n"
+      << "  --temporal-frames N   the streams' temporal averaging (0 or 1: "
+         "off) ["
+      << o.temporal.frames << "]\n"
+      << "  --temporal-gate-deg X its gate [" << o.temporal.gate_degrees
+      << "]\n";
   out << "  --no-edges            same as --edges off\n"
          "  --help                this text\n"
          "\n"
@@ -228,6 +247,7 @@ Options parseArguments(int argc, char** argv) {
   Options options;
   nf::SolverSettings& s = options.settings;
   bool width_given = false, height_given = false, frames_given = false;
+  bool stream_frames_given = false;
   for (int i = 1; i < argc; ++i) {
     std::string option = argv[i];
     std::string inline_value;
@@ -267,7 +287,7 @@ Options parseArguments(int argc, char** argv) {
       options.output_dir = value();
     } else if (option == "--cases") {
       options.run_paper = options.run_depth = options.run_fusion =
-          options.run_castle = false;
+          options.run_castle = options.run_stream = false;
       for (const std::string& item : splitCommas(option, value())) {
         if (item == "paper") {
           options.run_paper = true;
@@ -277,9 +297,12 @@ Options parseArguments(int argc, char** argv) {
           options.run_fusion = true;
         } else if (item == "castle") {
           options.run_castle = true;
+        } else if (item == "stream") {
+          options.run_stream = true;
         } else {
           throw UsageError(option +
-                           ": expected paper, depth, fusion or castle, got '" +
+                           ": expected paper, depth, fusion, castle or "
+                           "stream, got '" +
                            item + "'");
         }
       }
@@ -344,6 +367,19 @@ Options parseArguments(int argc, char** argv) {
     } else if (option == "--castle-tolerance") {
       options.castle_tolerance_m = parseDouble(option, value());
       requireInRange(option, options.castle_tolerance_m, 0.0, 1.0);
+    } else if (option == "--stream-frames") {
+      options.stream_frames = parseInt(option, value());
+      requireInRange(option, options.stream_frames, 2, 1000);
+      stream_frames_given = true;
+    } else if (option == "--stream-sigma") {
+      options.stream_sigma = parseDouble(option, value());
+      requireInRange(option, options.stream_sigma, 0.0, 10.0);
+    } else if (option == "--temporal-frames") {
+      options.temporal.frames = parseInt(option, value());
+      requireInRange(option, options.temporal.frames, 0, 100000);
+    } else if (option == "--temporal-gate-deg") {
+      options.temporal.gate_degrees = parseDouble(option, value());
+      requireInRange(option, options.temporal.gate_degrees, 0.1, 180.0);
     } else {
       throw UsageError("unknown option '" + option + "' (see --help)");
     }
@@ -355,6 +391,7 @@ Options parseArguments(int argc, char** argv) {
     if (!height_given) options.height = 120;
     if (options.sigmas.empty()) options.sigmas = {0.1, 0.5, 0.9};
     if (!frames_given) options.castle_frames = 2;
+    if (!stream_frames_given) options.stream_frames = 5;
   }
   if (options.sigmas.empty()) {
     for (int k = 1; k <= 9; ++k) options.sigmas.push_back(0.1 * k);
@@ -1141,6 +1178,185 @@ CastleOutcome runCastleCase(const Options& options, Timers* timers) {
   return outcome;
 }
 
+// --- Streams
+// -------------------------------------------------------------------
+
+/// One frame of a stream: what the solver gets, the ground truth, and the
+/// camera's rotation since the previous frame.
+struct StreamFrame {
+  nf::FusionProblem problem;
+  nf::NormalMap gt;
+  std::array<double, 9> R_cur_prev{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+};
+
+/// The ways a stream is solved, in table order.
+const std::array<const char*, 4> kStreamMethods{{
+    "each frame alone",
+    "each frame alone, inputs averaged over time",
+    "stream (warm start)",
+    "stream (warm start), inputs averaged over time",
+}};
+
+/// Scores of one stream sequence: [method][frame].
+struct StreamResult {
+  std::string title;
+  std::vector<std::vector<Score>> scores;
+  double seconds_per_frame = 0.0;  ///< each method's solve, mean
+};
+
+/// Solves a sequence four ways (kStreamMethods) and scores every frame on the
+/// pixels with ground truth. The warm-started streams warp their state by
+/// the camera's rotation (warpStateByRotation, as the node does with tf);
+/// the averages are carried by the same rotation (TemporalAverage).
+StreamResult runStream(const std::string& title,
+                       const std::vector<StreamFrame>& frames,
+                       const Options& options, Timers* timers) {
+  StreamResult result;
+  result.title = title;
+  result.scores.resize(kStreamMethods.size());
+  nf::Solver solver(options.settings);
+  nf::TemporalAverage average;
+  nf::SolverState plain_state, averaged_state;
+  Timer timer;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const StreamFrame& frame = frames[k];
+    nf::FusionProblem averaged = frame.problem;
+    average.apply(averaged.inputs, averaged.K,
+                  k > 0 ? &frame.R_cur_prev : nullptr, options.temporal,
+                  options.settings.num_threads);
+    nf::ScalarMap all(frame.gt.width(), frame.gt.height(), 1, 1.0f);
+    const nf::FusionProblem* problems[2] = {&frame.problem, &averaged};
+    for (int m = 0; m < 4; ++m) {
+      const nf::FusionProblem& problem = *problems[m % 2];
+      nf::NormalMap solved;
+      if (m < 2) {
+        solved = timed(&timer, [&] { return solver.solve(problem); });
+      } else {
+        nf::SolverState& state = m == 2 ? plain_state : averaged_state;
+        if (k > 0) {
+          nf::warpStateByRotation(state, problem.K, frame.R_cur_prev);
+        }
+        timed(&timer, [&] { return solver.solve(problem, state, k > 0); });
+        solved = state.normals;
+      }
+      result.scores[m].push_back(scoreOn(solved, frame.gt, all));
+    }
+    std::cerr << "evaluate: " << title << ", frame " << k << " done\n";
+  }
+  result.seconds_per_frame = timer.mean();
+  timers->solver.calls += timer.calls;
+  timers->solver.seconds += timer.seconds;
+  return result;
+}
+
+/// The synthetic stream: scene options.scenes[0], the camera turning 0.3
+/// degrees per frame at 30 fps (with the translation of the sequence), two
+/// inputs with new noise in each frame: the paper's noise and normals of a
+/// noisy depth map.
+std::vector<StreamFrame> syntheticStream(const Options& options) {
+  const int scene = options.scenes.front();
+  const std::vector<nf::synthetic::Frame> sequence =
+      nf::synthetic::renderSequence(scene, options.width, options.height,
+                                    options.stream_frames);
+  std::vector<StreamFrame> frames(sequence.size());
+  for (std::size_t k = 0; k < sequence.size(); ++k) {
+    const int id = 10000 + 100 * scene + static_cast<int>(k);
+    StreamFrame& f = frames[k];
+    f.problem.image = sequence[k].image;
+    f.problem.K = sequence[k].K;
+    f.problem.inputs = {inputOf(nf::synthetic::addPaperNoise(
+                            sequence[k].normals_gt, options.stream_sigma,
+                            noiseSeed(options, id, 1, options.stream_sigma))),
+                        inputOf(depthInput(options, sequence[k], id))};
+    f.gt = sequence[k].normals_gt;
+    if (k > 0) {
+      f.R_cur_prev = nf::synthetic::relativeRotation(sequence[k].pose,
+                                                     sequence[k - 1].pose);
+    }
+  }
+  return frames;
+}
+
+/// Castle's first frames in a row, uncropped (a stream keeps its size), the
+/// normals of each depth map with new depth-camera noise; empty when the
+/// sequence is not installed.
+std::vector<StreamFrame> castleStream(const Options& options) {
+  std::vector<StreamFrame> frames;
+  if (!nf::castle::available(options.castle_dir)) return frames;
+  const std::vector<int> numbers = nf::castle::frameNumbers(options.castle_dir);
+  const std::vector<nf::castle::Face> model =
+      nf::castle::loadModel(options.castle_dir);
+  nf::castle::LoadSettings load;
+  load.agreement_tolerance_m = options.castle_tolerance_m;
+  load.crop_margin = -1;
+  const int count =
+      std::min<int>(options.stream_frames, static_cast<int>(numbers.size()));
+  nf::synthetic::Pose previous;
+  for (int k = 0; k < count; ++k) {
+    const nf::castle::Frame frame =
+        nf::castle::loadFrame(options.castle_dir, numbers[k], model, load);
+    StreamFrame f;
+    f.problem.image = frame.image;
+    f.problem.K = frame.K;
+    const nf::ScalarMap noisy_depth = nf::synthetic::addDepthNoise(
+        frame.depth, options.depth_sigma_at_1m, options.depth_step_m,
+        options.depth_dropout, noiseSeed(options, 20000 + numbers[k], 4, 0.0));
+    f.problem.inputs = {
+        inputOf(nf::synthetic::normalsFromDepth(noisy_depth, frame.K))};
+    f.gt = frame.normals_gt;
+    if (k > 0) {
+      f.R_cur_prev =
+          nf::synthetic::relativeRotation(frame.T_depth_obj, previous);
+    }
+    previous = frame.T_depth_obj;
+    frames.push_back(std::move(f));
+  }
+  return frames;
+}
+
+/// The table of a stream: per method the mean PSNR and angles over the
+/// frames, and the PSNR against each frame solved alone (mean, worst frame).
+std::string streamTable(const StreamResult& r) {
+  std::ostringstream t;
+  t << "| method | PSNR (dB) | mean angle (deg) | median angle (deg) | PSNR "
+       "against each frame alone: mean / worst frame (dB) |\n"
+       "|---|---:|---:|---:|---:|\n";
+  const std::vector<Score>& alone = r.scores[0];
+  for (std::size_t m = 0; m < kStreamMethods.size(); ++m) {
+    const Score mean = meanOf(r.scores[m]);
+    double sum = 0.0, worst = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k < alone.size(); ++k) {
+      const double d = r.scores[m][k].psnr_db - alone[k].psnr_db;
+      sum += d;
+      worst = std::min(worst, d);
+    }
+    t << "| " << kStreamMethods[m] << " | " << fixed(mean.psnr_db, 2) << " | "
+      << fixed(mean.angles.mean_deg, 2) << " | "
+      << fixed(mean.angles.median_deg, 2) << " | ";
+    if (m == 0) {
+      t << "- |\n";
+    } else {
+      t << signedFixed(sum / alone.size(), 2) << " / " << signedFixed(worst, 2)
+        << " |\n";
+    }
+  }
+  t << "\nPer frame, PSNR (dB):\n\n| frame |";
+  for (std::size_t m = 0; m < kStreamMethods.size(); ++m) {
+    t << " " << kStreamMethods[m] << " |";
+  }
+  t << "\n|---:|";
+  for (std::size_t m = 0; m < kStreamMethods.size(); ++m) t << "---:|";
+  t << "\n";
+  for (std::size_t k = 0; k < alone.size(); ++k) {
+    t << "| " << k << " |";
+    for (std::size_t m = 0; m < kStreamMethods.size(); ++m) {
+      t << " " << fixed(r.scores[m][k].psnr_db, 2) << " |";
+    }
+    t << "\n";
+  }
+  return t.str();
+}
+
 // --- Output
 // --------------------------------------------------------------------
 
@@ -1760,6 +1976,20 @@ int run(int argc, char** argv) {
     if (!castle.ran)
       std::cerr << "evaluate: castle case " << castle.note << "\n";
   }
+  std::vector<StreamResult> streams;
+  if (options.run_stream) {
+    streams.push_back(
+        runStream("synthetic scene " + std::to_string(options.scenes.front()),
+                  syntheticStream(options), options, &timers));
+    const std::vector<StreamFrame> castle_frames = castleStream(options);
+    if (castle_frames.empty()) {
+      std::cerr << "evaluate: castle stream skipped (the sequence is not at '"
+                << options.castle_dir << "')\n";
+    } else {
+      streams.push_back(
+          runStream("ViSP Castle", castle_frames, options, &timers));
+    }
+  }
   std::vector<CaseResult> all = paper;
   if (options.run_depth) all.push_back(depth);
   all.insert(all.end(), fusion.begin(), fusion.end());
@@ -1897,6 +2127,36 @@ int run(int argc, char** argv) {
       md << "\n## 4. ViSP Castle\n\nThe castle case was " << castle.note
          << ".\n";
     }
+  }
+  if (options.run_stream) {
+    md << "\n## 5. Streams: each frame alone, the warm-started stream, and "
+          "the inputs averaged over time\n\n"
+       << "Consecutive frames of a moving camera with new noise in every "
+          "frame, solved with the regularizer's settings above: each frame "
+          "alone (a cold start), or as a stream (warm-started from the "
+          "previous frame's result warped by the camera's rotation, as the "
+          "node does with tf; no time budget), each on the frame's own inputs "
+          "or on its inputs averaged over time (TemporalAverage: "
+       << options.temporal.frames << " frames, gate "
+       << fixed(options.temporal.gate_degrees, 0)
+       << " degrees, carried by the same rotation; the node's "
+          "temporal_frames). Scores on every pixel with ground truth; frame "
+          "0 is the same for all four.\n";
+    for (std::size_t k = 0; k < streams.size(); ++k) {
+      const StreamResult& r = streams[k];
+      md << "\n### 5" << static_cast<char>('a' + k) << ". " << r.title << " ("
+         << r.scores[0].size() << " frames, " << fixed(r.seconds_per_frame, 3)
+         << " s per solve)\n\n"
+         << streamTable(r);
+    }
+    md << "\nSynthetic: scene " << options.scenes.front() << " at "
+       << options.width << "x" << options.height
+       << ", the camera turning 0.3 degrees per frame (and moving), inputs: "
+          "paper noise sigma "
+       << fixed(options.stream_sigma, 2)
+       << " and normals of a noisy depth map (" << depthNoiseText(options)
+       << "). Castle: its first frames in a row, uncropped, normals of each "
+          "depth map with new depth-camera noise, ground truth as in case 4.\n";
   }
   if (!all.empty()) {
     md << "\n## Summary: the regularizer against every ximgproc peer\n\n"
