@@ -373,7 +373,8 @@ void FusionPipeline::process(const InputSet& set,
   const bool joined = averaging && aligned && averages_current_;
   if (averaging) {
     const auto average_start = std::chrono::steady_clock::now();
-    // Averages left from before averaging was last turned off are stale.
+    // A new stream, or averages left from before averaging was last turned
+    // off (stale): they restart with this set.
     if (!joined) temporal_.reset();
     try {
       temporal_.apply(problem_.inputs, problem_.K,
