@@ -74,12 +74,13 @@ void TemporalAverage::apply(std::vector<NormalInput>& inputs,
       h.count.resize(W, H, 1);
       h.count.fill(0.0f);
     }
-    if (R_cur_prev != nullptr) {
-      // The rotation in the input's frame: the solver reads n_optical = M
-      // n_input, so an input-frame vector turns by M^T R M.
+    // The rotation in the input's frame: the solver reads n_optical = M
+    // n_input, so an input-frame vector turns by M^T R M.
+    const bool carry = R_cur_prev != nullptr;
+    float R_in[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    if (carry) {
       const auto& M = inputs[l].orientation.M;
       const auto& R = *R_cur_prev;
-      float R_in[9];
       for (int i = 0; i < 3; ++i) {
         for (int j = 0; j < 3; ++j) {
           double sum = 0.0;
@@ -93,75 +94,79 @@ void TemporalAverage::apply(std::vector<NormalInput>& inputs,
       }
       h.scratch_average.resize(W, H, 3);
       h.scratch_count.resize(W, H, 1);
-      // Carry: the average of the nearest previous pixel, rotated.
+    }
+    // One pass: each pixel's average carried from the previous frame, then
+    // its sample blended in; written to the scratch buffers when carried
+    // (then swapped in), in place otherwise (each pixel reads only itself).
+    NormalMap& next_average = carry ? h.scratch_average : h.average;
+    ScalarMap& next_count = carry ? h.scratch_count : h.count;
 #pragma omp parallel for num_threads(threads) schedule(static)
-      for (int y = 0; y < H; ++y) {
-        for (int x = 0; x < W; ++x) {
-          const long i = static_cast<long>(y) * W + x;
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const long i = static_cast<long>(y) * W + x;
+        // Carry: the average of the nearest previous pixel, rotated.
+        long j = i;
+        bool inside = true;
+        if (carry) {
           double u = 0.0, v = 0.0;
-          float carried = 0.0f;
-          float a[3] = {0.0f, 0.0f, 0.0f};
-          if (previous.at(x, y, W, H, &u, &v)) {
-            const long j = std::lround(v) * W + std::lround(u);
-            carried = h.count.plane(0)[j];
-            if (carried > 0.0f) {
-              const float s[3] = {h.average.plane(0)[j], h.average.plane(1)[j],
-                                  h.average.plane(2)[j]};
-              for (int r = 0; r < 3; ++r) {
-                a[r] = R_in[3 * r] * s[0] + R_in[3 * r + 1] * s[1] +
-                       R_in[3 * r + 2] * s[2];
-              }
+          inside = previous.at(x, y, W, H, &u, &v);
+          // u, v >= 0 inside: + 0.5 and truncation round to nearest.
+          j = inside
+                  ? static_cast<long>(v + 0.5) * W + static_cast<long>(u + 0.5)
+                  : 0;
+        }
+        float count = inside ? h.count.plane(0)[j] : 0.0f;
+        const float s[3] = {h.average.plane(0)[j], h.average.plane(1)[j],
+                            h.average.plane(2)[j]};
+        float a[3] = {0.0f, 0.0f, 0.0f};
+        if (count > 0.0f) {
+          for (int r = 0; r < 3; ++r) {
+            a[r] = R_in[3 * r] * s[0] + R_in[3 * r + 1] * s[1] +
+                   R_in[3 * r + 2] * s[2];
+          }
+        }
+        // Blend: the pixel's sample, if valid, into the carried average,
+        // which the input then holds.
+        float f[3] = {samples.plane(0)[i], samples.plane(1)[i],
+                      samples.plane(2)[i]};
+        if (isValidNormal(f[0], f[1], f[2])) {
+          const float inv_f =
+              1.0f / std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+          for (float& c : f) c *= inv_f;
+          bool restart = true;
+          if (count > 0.0f &&
+              a[0] * f[0] + a[1] * f[1] + a[2] * f[2] >= cos_gate) {
+            // Within the gate: the running mean, exponential past `frames`.
+            const float k = std::min(count + 1.0f, max_count);
+            const float w = 1.0f / k;
+            float m[3], norm2 = 0.0f;
+            for (int c = 0; c < 3; ++c) {
+              m[c] = (1.0f - w) * a[c] + w * f[c];
+              norm2 += m[c] * m[c];
+            }
+            // |m| >= cos(gate / 2) > 0 for a gate of at most 180 degrees,
+            // except for exactly opposite vectors, which restart it.
+            if (norm2 > 1e-12f) {
+              const float inv = 1.0f / std::sqrt(norm2);
+              for (int c = 0; c < 3; ++c) a[c] = m[c] * inv;
+              count = k;
+              restart = false;
             }
           }
-          for (int c = 0; c < 3; ++c) h.scratch_average.plane(c)[i] = a[c];
-          h.scratch_count.plane(0)[i] = carried;
+          if (restart) {
+            // No average here yet, or the sample left the gate: a new one.
+            for (int c = 0; c < 3; ++c) a[c] = f[c];
+            count = 1.0f;
+          }
+          for (int c = 0; c < 3; ++c) samples.plane(c)[i] = a[c];
         }
+        for (int c = 0; c < 3; ++c) next_average.plane(c)[i] = a[c];
+        next_count.plane(0)[i] = count;
       }
+    }
+    if (carry) {
       std::swap(h.average, h.scratch_average);
       std::swap(h.count, h.scratch_count);
-    }
-    // Blend: each valid sample into its pixel's average, which the input
-    // then holds.
-    const long N = static_cast<long>(W) * H;
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (long i = 0; i < N; ++i) {
-      float f[3] = {samples.plane(0)[i], samples.plane(1)[i],
-                    samples.plane(2)[i]};
-      if (!isValidNormal(f[0], f[1], f[2])) continue;
-      const float inv_f =
-          1.0f / std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
-      for (float& c : f) c *= inv_f;
-      float& count = h.count.plane(0)[i];
-      const float a[3] = {h.average.plane(0)[i], h.average.plane(1)[i],
-                          h.average.plane(2)[i]};
-      float next[3];
-      if (count > 0.0f && a[0] * f[0] + a[1] * f[1] + a[2] * f[2] >= cos_gate) {
-        // Within the gate: the running mean, exponential past `frames`.
-        count = std::min(count + 1.0f, max_count);
-        const float w = 1.0f / count;
-        float m[3], norm2 = 0.0f;
-        for (int c = 0; c < 3; ++c) {
-          m[c] = (1.0f - w) * a[c] + w * f[c];
-          norm2 += m[c] * m[c];
-        }
-        // |m| >= cos(gate / 2) > 0 for a gate of at most 180 degrees, except
-        // for exactly opposite vectors, which then restart the average.
-        if (norm2 > 1e-12f) {
-          const float inv = 1.0f / std::sqrt(norm2);
-          for (int c = 0; c < 3; ++c) next[c] = m[c] * inv;
-        } else {
-          count = 1.0f;
-          for (int c = 0; c < 3; ++c) next[c] = f[c];
-        }
-      } else {
-        // No average here yet, or the sample left the gate: a new one.
-        count = 1.0f;
-        for (int c = 0; c < 3; ++c) next[c] = f[c];
-      }
-      for (int c = 0; c < 3; ++c) {
-        h.average.plane(c)[i] = next[c];
-        samples.plane(c)[i] = next[c];
-      }
     }
   }
 }
