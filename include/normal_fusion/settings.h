@@ -155,6 +155,10 @@ struct SolverSettings {
   void validate() const;
 };
 
+/// The threads a `num_threads` setting stands for: itself when > 0, else
+/// (0 = all) the processors OpenMP sees, at least 1.
+int resolveThreadCount(int num_threads);
+
 /// Parses "l2" / "squared_l2", "off" / "hard" / "soft", "luminance" /
 /// "color_max", "exponential" / "rational", "sobel" / "forward_difference",
 /// "fast" / "reference". Throws ParameterError.

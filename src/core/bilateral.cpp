@@ -2,8 +2,6 @@
 // image's luminance, averaging with the extrinsic (Euclidean, normalized) mean.
 #include "normal_fusion/bilateral.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -13,6 +11,7 @@
 #include <vector>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/settings.h"
 
 namespace normal_fusion {
 namespace {
@@ -139,9 +138,7 @@ NormalMap crossBilateralFilter(const NormalMap& normals,
     }
   }
 
-  const int threads = settings.num_threads > 0
-                          ? settings.num_threads
-                          : std::max(1, omp_get_num_procs());
+  const int threads = resolveThreadCount(settings.num_threads);
   const float* lum = luminance.data();
   const float* nx = unit_x.data();
   const float* ny = unit_y.data();

@@ -1,5 +1,8 @@
 #include "normal_fusion/settings.h"
 
+#include <omp.h>
+
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -36,6 +39,10 @@ void requireRange(const char* name, double value, double lo, double hi) {
 }
 
 }  // namespace
+
+int resolveThreadCount(int num_threads) {
+  return num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
+}
 
 void SolverSettings::validate() const {
   requireAtLeast("lambda", lambda, 0.0);

@@ -3,8 +3,6 @@
 // Chambolle-Pock inner solver (kernels_reference.cpp / kernels_fast.cpp).
 #include "normal_fusion/solver.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -53,10 +51,6 @@ constexpr int kFillPasses = 16;
 /// The largest finite float (comparisons against it reject infinities and
 /// NaN alike).
 constexpr float kFloatMax = std::numeric_limits<float>::max();
-
-int resolveThreads(int requested) {
-  return requested > 0 ? requested : std::max(1, omp_get_num_procs());
-}
 
 }  // namespace
 
@@ -404,7 +398,7 @@ PreparedLevel prepareFinest(const FusionProblem& problem,
   PreparedLevel level;
   EdgeWeightScratch scratch;
   prepareFinestInto(problem, settings, level, scratch,
-                    resolveThreads(settings.num_threads));
+                    resolveThreadCount(settings.num_threads));
   return level;
 }
 
@@ -816,7 +810,7 @@ class SolverImpl {
         has_budget_start_ ? budget_start_ : start;
     has_budget_start_ = false;
     setDeadline(budget_start, settings_.time_budget_ms);
-    threads_ = resolveThreads(settings_.num_threads);
+    threads_ = resolveThreadCount(settings_.num_threads);
     if (refine_threads_.maxThreads() != threads_)
       refine_threads_.reset(threads_);
 
@@ -1362,7 +1356,7 @@ double computeEnergy(const FusionProblem& problem,
         sizeText(normals));
   }
   return internal::energy(level, settings.huber_eps, settings.penalty, normals,
-                          resolveThreads(settings.num_threads));
+                          resolveThreadCount(settings.num_threads));
 }
 
 }  // namespace normal_fusion

@@ -1,7 +1,5 @@
 #include "normal_fusion/temporal.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -48,8 +46,7 @@ void TemporalAverage::apply(std::vector<NormalInput>& inputs,
       K, R_cur_prev != nullptr
              ? *R_cur_prev
              : std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1});
-  const int threads =
-      num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
+  const int threads = resolveThreadCount(num_threads);
   const int L = static_cast<int>(inputs.size());
   for (int l = 0; l < L; ++l) {
     if (inputs[l].normals.channels() != 3) {

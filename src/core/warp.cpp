@@ -1,7 +1,5 @@
 #include "normal_fusion/warp.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -233,8 +231,7 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
   const std::size_t N = state.normals.pixelCount();
   const int L = static_cast<int>(state.dual_data.size());
   const bool has_duals = state.compatible(W, H, L);
-  const int threads =
-      num_threads > 0 ? num_threads : std::max(1, omp_get_num_procs());
+  const int threads = resolveThreadCount(num_threads);
   // The warped state is written into the scratch buffers (sized once), then
   // swapped in.
   if (has_duals) {

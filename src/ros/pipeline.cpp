@@ -1,6 +1,5 @@
 #include "normal_fusion/ros/pipeline.h"
 
-#include <omp.h>
 #include <boost/make_shared.hpp>
 
 #include <algorithm>
@@ -223,9 +222,8 @@ void FusionPipeline::process(const InputSet& set,
   const auto started = std::chrono::steady_clock::now();
   output->warning.clear();
   // Threads of the inputs' resampling: the solver's (0 = all processors).
-  const int conversion_threads = settings_.solver.num_threads > 0
-                                     ? settings_.solver.num_threads
-                                     : std::max(1, omp_get_num_procs());
+  const int conversion_threads =
+      resolveThreadCount(settings_.solver.num_threads);
   if (!set.image) throw InputError(topics_.image + ": no image in the set");
   if (!set.camera_info) {
     throw InputError(topics_.camera_info +
