@@ -21,7 +21,7 @@ struct TemporalSettings {
   /// the average anew: content that moved or changed, an edge that the
   /// camera's translation (which the rotation ignores) shifted, an outlier
   /// that the average held. In (0, 180].
-  double gate_degrees = 60.0;
+  double gate_degrees = 45.0;
 
   bool enabled() const { return frames > 1; }
   /// Throws ParameterError naming the first setting that is out of range.
