@@ -11,6 +11,9 @@
 // solve, and with --continue N1,N2,... the deficit of the live state solved
 // on (whole image, no budget) for N1, N2, ... more inner iterations at most:
 // how much whole-image work a frame would need to match the cold solve.
+// With --temporal-frames N the live solver's inputs are averaged over time
+// (TemporalAverage, its time counted in the frame's budget) while the cold
+// solves keep each frame's own inputs.
 #include <algorithm>
 #include <array>
 #include <atomic>
