@@ -1201,7 +1201,7 @@ const std::array<const char*, 4> kStreamMethods{{
 struct StreamResult {
   std::string title;
   std::vector<std::vector<Score>> scores;
-  double seconds_per_frame = 0.0;  ///< one solve, mean over every method
+  double seconds_per_solve = 0.0;  ///< one solve, mean over every method
 };
 
 /// Solves a sequence four ways (kStreamMethods) and scores every frame on the
@@ -1243,7 +1243,7 @@ StreamResult runStream(const std::string& title,
     }
     std::cerr << "evaluate: " << title << ", frame " << k << " done\n";
   }
-  result.seconds_per_frame = timer.mean();
+  result.seconds_per_solve = timer.mean();
   return result;
 }
 
@@ -2144,7 +2144,7 @@ int run(int argc, char** argv) {
     for (std::size_t k = 0; k < streams.size(); ++k) {
       const StreamResult& r = streams[k];
       md << "\n### 5" << static_cast<char>('a' + k) << ". " << r.title << " ("
-         << r.scores[0].size() << " frames, " << fixed(r.seconds_per_frame, 3)
+         << r.scores[0].size() << " frames, " << fixed(r.seconds_per_solve, 3)
          << " s per solve)\n\n"
          << streamTable(r);
     }
