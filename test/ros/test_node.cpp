@@ -520,7 +520,9 @@ TEST(Node, DynamicReconfigureTakesEffectOnTheNextFrame) {
   EXPECT_GT(client.stats(again.image->header.stamp)->inner_iterations, 3u);
 }
 
-TEST(Node, RotationCompensatedWarmStartWithTf) {
+/// The warm start and the inputs' temporal averages (temporal_frames, set
+/// through dynamic_reconfigure) carried by the camera's rotation from tf.
+TEST(Node, RotationCompensatedWarmStartAndInputAveragesWithTf) {
   if (compareMode()) GTEST_SKIP();
   NodeClient client("");
   client.listen(false, false, true);
@@ -538,6 +540,10 @@ TEST(Node, RotationCompensatedWarmStartWithTf) {
   timeout.name = "tf_timeout";
   timeout.value = 1.0;
   srv.request.config.doubles.push_back(timeout);
+  dynamic_reconfigure::IntParameter averaging;
+  averaging.name = "temporal_frames";
+  averaging.value = 8;
+  srv.request.config.ints.push_back(averaging);
   ASSERT_TRUE(ros::service::call(service, srv));
   tf2_ros::TransformBroadcaster broadcaster;
   ros::WallDuration(0.5).sleep();  // the node's tf listener connects
@@ -552,6 +558,8 @@ TEST(Node, RotationCompensatedWarmStartWithTf) {
     const auto stats = client.stats(m.image->header.stamp);
     EXPECT_EQ(stats->warm_started, k > 0) << "frame " << k;
     EXPECT_EQ(stats->rotation_compensated, k > 0) << "frame " << k;
+    EXPECT_EQ(stats->inputs_averaged, k > 0) << "frame " << k;
+    EXPECT_GT(stats->input_average_time, 0.0) << "frame " << k;
   }
   dynamic_reconfigure::Reconfigure restore;
   restore.request.config = current.response.config;
