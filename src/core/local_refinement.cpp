@@ -243,9 +243,21 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
   growTo(link_w, links);
   growTo(link_pixel, links);
   for (auto& component : p) growTo(component, links);
+  for (int ch = 0; ch < 3; ++ch) growTo(ray[ch], P);
+  // The active pixels come in raster order (ActiveSet::build): their rows
+  // are followed, not divided out.
+  int y = 0, row_start = 0;
   for (int k = 0; k < P; ++k) {
     const int i = active.pixels[k];
-    const bool has_right = i % W + 1 < W, has_below = i / W + 1 < H;
+    while (i >= row_start + W) {
+      row_start += W;
+      ++y;
+    }
+    const int x = i - row_start;
+    float r[3];
+    level.ray(x, y, r);
+    for (int ch = 0; ch < 3; ++ch) ray[ch][k] = r[ch];
+    const bool has_right = x + 1 < W, has_below = y + 1 < H;
     link_a[k] = link_a[P + k] = k;
     link_b[k] = has_right ? node(i + 1) : k;
     link_pixel[k] = has_right ? i : -1;
@@ -274,7 +286,6 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
     growTo(nbar[ch], num_nodes);
     growTo(n[ch], P);
     growTo(n0[ch], P);
-    growTo(ray[ch], P);
     growTo(d[ch], P);
   }
   for (int ch = 0; ch < 3; ++ch) growTo(node_n[ch], num_nodes);
@@ -309,12 +320,7 @@ void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
 #pragma omp for schedule(static)
     for (int k = 0; k < P; ++k) {
       const int i = node_pixel[k];
-      float r[3];
-      level.ray(i % W, i / W, r);
-      for (int ch = 0; ch < 3; ++ch) {
-        n[ch][k] = n0[ch][k] = s.n0.plane(ch)[i];
-        ray[ch][k] = r[ch];
-      }
+      for (int ch = 0; ch < 3; ++ch) n[ch][k] = n0[ch][k] = s.n0.plane(ch)[i];
       for (int l = 0; l < L; ++l) {
         for (int ch = 0; ch < 3; ++ch) {
           q[(3 * l + ch) * P + k] = s.q[l].plane(ch)[i];
