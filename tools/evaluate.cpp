@@ -1200,6 +1200,7 @@ const std::array<const char*, 4> kStreamMethods{{
 /// Scores of one stream sequence: [method][frame].
 struct StreamResult {
   std::string title;
+  std::string tag;  ///< file name part: "synthetic", "castle"
   std::vector<std::vector<Score>> scores;
   double seconds_per_solve = 0.0;  ///< one solve, mean over every method
 };
@@ -1208,11 +1209,12 @@ struct StreamResult {
 /// pixels with ground truth. The warm-started streams warp their state by
 /// the camera's rotation (warpStateByRotation, as the node does with tf);
 /// the averages are carried by the same rotation (TemporalAverage).
-StreamResult runStream(const std::string& title,
+StreamResult runStream(const std::string& title, const std::string& tag,
                        const std::vector<StreamFrame>& frames,
                        const Options& options) {
   StreamResult result;
   result.title = title;
+  result.tag = tag;
   result.scores.resize(kStreamMethods.size());
   nf::Solver solver(options.settings);
   nf::TemporalAverage average;
@@ -1335,8 +1337,8 @@ std::string streamTable(const StreamResult& r) {
     if (m == 0) {
       t << "- |\n";
     } else {
-      t << signedFixed(sum / (alone.size() - 1), 2) << " / " << signedFixed(worst, 2)
-        << " |\n";
+      t << signedFixed(sum / (alone.size() - 1), 2) << " / "
+        << signedFixed(worst, 2) << " |\n";
     }
   }
   t << "\nPer frame, PSNR (dB):\n\n| frame |";
@@ -1628,7 +1630,11 @@ void drawText(cv::Mat* canvas, const std::string& text, cv::Point origin,
               thickness, cv::LINE_AA);
 }
 
-/// PSNR against sigma for each method: axes, ticks, grid, legend.
+void writeLinePlot(const std::string& path, const std::string& title,
+                   const std::string& x_label, const std::vector<double>& xs,
+                   int x_digits, const std::vector<Series>& series);
+
+/// PSNR against sigma for each method of the paper case.
 void writePlot(const std::string& path, const std::vector<CaseResult>& results,
                const Options& options) {
   std::vector<Series> series = {
@@ -1655,6 +1661,19 @@ void writePlot(const std::string& path, const std::vector<CaseResult>& results,
     series.back().psnr_db.push_back(
         r.rows[r.regularizer_row].mean.valid.psnr_db);
   }
+  writeLinePlot(path,
+                "PSNR of the normals vs noise level (" +
+                    std::to_string(options.scenes.size()) + " scene(s), " +
+                    std::to_string(options.width) + "x" +
+                    std::to_string(options.height) + "; filters at their best)",
+                "noise sigma", sigmas, 1, series);
+}
+
+/// A line plot of PSNR (dB) against x, one curve per series, markers at the
+/// xs (ticks labelled with x_digits decimals), the legend right of the axes.
+void writeLinePlot(const std::string& path, const std::string& title,
+                   const std::string& x_label, const std::vector<double>& xs,
+                   int x_digits, const std::vector<Series>& series) {
   // Data ranges, padded; y ticks on a step of 1, 2, 5 or 10 dB.
   double y_min = std::numeric_limits<double>::infinity();
   double y_max = -y_min;
@@ -1677,33 +1696,44 @@ void writePlot(const std::string& path, const std::vector<CaseResult>& results,
   y_min = std::floor(y_min / step) * step;
   y_max = std::ceil(y_max / step) * step;
   if (y_max <= y_min) y_max = y_min + step;
-  const double x_min =
-      std::max(0.0, *std::min_element(sigmas.begin(), sigmas.end()) - 0.05);
-  const double x_max = *std::max_element(sigmas.begin(), sigmas.end()) + 0.05;
+  // x padded by half the smallest spacing of the xs.
+  double pad = 0.5;
+  for (std::size_t i = 1; i < xs.size(); ++i) {
+    pad = std::min(pad, 0.5 * std::abs(xs[i] - xs[i - 1]));
+  }
+  const double x_min = *std::min_element(xs.begin(), xs.end()) - pad;
+  const double x_max = *std::max_element(xs.begin(), xs.end()) + pad;
 
-  // The legend sits right of the axes, clear of the curves.
-  const int legend_w = 250, row_h = 24;
+  // The legend sits right of the axes, clear of the curves, as wide as its
+  // longest label.
+  int legend_w = 250;
+  for (const Series& s : series) {
+    int baseline = 0;
+    const cv::Size text =
+        cv::getTextSize(s.label, cv::FONT_HERSHEY_SIMPLEX, 0.5, 1, &baseline);
+    legend_w = std::max(legend_w, text.width + 70);
+  }
+  const int row_h = 24;
   const int width = 900 + legend_w, height = 600;
   const int left = 80, right = 30 + legend_w, top = 50, bottom = 70;
   cv::Mat canvas(height, width, CV_8UC3, cv::Scalar(255, 255, 255));
   const cv::Scalar black(0, 0, 0), grid(225, 225, 225);
-  const auto px = [&](double sigma) {
-    return left +
-           static_cast<int>(std::lround((sigma - x_min) / (x_max - x_min) *
-                                        (width - left - right)));
+  const auto px = [&](double x) {
+    return left + static_cast<int>(std::lround((x - x_min) / (x_max - x_min) *
+                                               (width - left - right)));
   };
   const auto py = [&](double psnr_db) {
     return height - bottom -
            static_cast<int>(std::lround((psnr_db - y_min) / (y_max - y_min) *
                                         (height - top - bottom)));
   };
-  // Grid and ticks: x at every sigma, y every `step` dB.
-  for (double sigma : sigmas) {
-    const int x = px(sigma);
+  // Grid and ticks: x at every xs, y every `step` dB.
+  for (double value : xs) {
+    const int x = px(value);
     cv::line(canvas, {x, top}, {x, height - bottom}, grid, 1);
     cv::line(canvas, {x, height - bottom}, {x, height - bottom + 6}, black, 1);
-    drawText(&canvas, fixed(sigma, 1), {x - 12, height - bottom + 24}, 0.5,
-             black);
+    drawText(&canvas, fixed(value, x_digits), {x - 12, height - bottom + 24},
+             0.5, black);
   }
   for (double v = y_min; v <= y_max + 1e-9; v += step) {
     const int y = py(v);
@@ -1715,7 +1745,7 @@ void writePlot(const std::string& path, const std::vector<CaseResult>& results,
   cv::line(canvas, {left, top}, {left, height - bottom}, black, 2);
   cv::line(canvas, {left, height - bottom}, {width - right, height - bottom},
            black, 2);
-  drawText(&canvas, "noise sigma", {(width + left) / 2 - 50, height - 20}, 0.6,
+  drawText(&canvas, x_label, {(width + left) / 2 - 50, height - 20}, 0.6,
            black);
   // The y label, drawn horizontally then turned by 90 degrees.
   cv::Mat label(30, 120, CV_8UC3, cv::Scalar(255, 255, 255));
@@ -1723,20 +1753,15 @@ void writePlot(const std::string& path, const std::vector<CaseResult>& results,
   cv::rotate(label, label, cv::ROTATE_90_COUNTERCLOCKWISE);
   label.copyTo(
       canvas(cv::Rect(8, (height - label.rows) / 2, label.cols, label.rows)));
-  drawText(&canvas,
-           "PSNR of the normals vs noise level (" +
-               std::to_string(options.scenes.size()) + " scene(s), " +
-               std::to_string(options.width) + "x" +
-               std::to_string(options.height) + "; filters at their best)",
-           {left, 32}, 0.6, black, 1);
+  drawText(&canvas, title, {left, 32}, 0.6, black, 1);
   // Curves with markers.
   for (const Series& s : series) {
-    for (std::size_t i = 0; i < sigmas.size(); ++i) {
+    for (std::size_t i = 0; i < xs.size(); ++i) {
       if (!std::isfinite(s.psnr_db[i])) continue;
-      const cv::Point p(px(sigmas[i]), py(s.psnr_db[i]));
+      const cv::Point p(px(xs[i]), py(s.psnr_db[i]));
       cv::circle(canvas, p, 4, s.colour, cv::FILLED, cv::LINE_AA);
-      if (i + 1 < sigmas.size() && std::isfinite(s.psnr_db[i + 1])) {
-        cv::line(canvas, p, {px(sigmas[i + 1]), py(s.psnr_db[i + 1])}, s.colour,
+      if (i + 1 < xs.size() && std::isfinite(s.psnr_db[i + 1])) {
+        cv::line(canvas, p, {px(xs[i + 1]), py(s.psnr_db[i + 1])}, s.colour,
                  s.thickness, cv::LINE_AA);
       }
     }
@@ -1758,6 +1783,29 @@ void writePlot(const std::string& path, const std::vector<CaseResult>& results,
   if (!cv::imwrite(path, canvas)) {
     throw nf::InputError("cannot write '" + path + "'");
   }
+}
+
+/// PSNR per frame of a stream, the four ways of kStreamMethods.
+void writeStreamPlot(const std::string& path, const StreamResult& r,
+                     const Options& options) {
+  const std::array<cv::Scalar, 4> colours = {
+      cv::Scalar(140, 140, 140), cv::Scalar(40, 170, 230),
+      cv::Scalar(200, 120, 30), cv::Scalar(30, 30, 210)};
+  std::vector<Series> series;
+  for (std::size_t m = 0; m < kStreamMethods.size(); ++m) {
+    Series s{kStreamMethods[m], colours[m], m == 3 ? 3 : 2, {}};
+    for (const Score& score : r.scores[m]) s.psnr_db.push_back(score.psnr_db);
+    series.push_back(std::move(s));
+  }
+  std::vector<double> frames;
+  for (std::size_t k = 0; k < r.scores[0].size(); ++k) {
+    frames.push_back(static_cast<double>(k));
+  }
+  writeLinePlot(path,
+                "PSNR per frame, " + r.title + " (temporal_frames " +
+                    std::to_string(options.temporal.frames) + ", gate " +
+                    fixed(options.temporal.gate_degrees, 0) + " deg)",
+                "frame", frames, 0, series);
 }
 
 /// File-name form of a method name: lower case, '_' for anything else.
@@ -1979,14 +2027,15 @@ int run(int argc, char** argv) {
   if (options.run_stream) {
     streams.push_back(
         runStream("synthetic scene " + std::to_string(options.scenes.front()),
-                  syntheticStream(options), options));
+                  "synthetic", syntheticStream(options), options));
     const std::vector<StreamFrame> castle_frames = castleStream(options);
     if (castle_frames.size() < 2) {
       std::cerr << "evaluate: castle stream skipped (fewer than two frames of "
                    "the sequence at '"
                 << options.castle_dir << "')\n";
     } else {
-      streams.push_back(runStream("ViSP Castle", castle_frames, options));
+      streams.push_back(
+          runStream("ViSP Castle", "castle", castle_frames, options));
     }
   }
   std::vector<CaseResult> all = paper;
@@ -2027,6 +2076,11 @@ int run(int argc, char** argv) {
              options.output_dir, castle.example, castle.result, options)) {
       example_files.push_back(f);
     }
+  }
+  std::vector<std::string> stream_plots;
+  for (const StreamResult& r : streams) {
+    stream_plots.push_back((dir / ("stream_" + r.tag + ".png")).string());
+    writeStreamPlot(stream_plots.back(), r, options);
   }
   const double total_seconds =
       std::chrono::duration<double>(Clock::now() - start).count();
@@ -2177,6 +2231,7 @@ int run(int argc, char** argv) {
   md << "\n## Files\n\nIn the output folder, beside this file:\n\n";
   if (!paper.empty()) md << "- " << file_name(plot_path) << "\n";
   md << "- " << file_name(csv_path) << "\n- " << file_name(grid_path) << "\n";
+  for (const std::string& f : stream_plots) md << "- " << file_name(f) << "\n";
   for (const std::string& f : example_files) {
     md << "- " << file_name(f) << "\n";
   }
