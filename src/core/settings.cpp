@@ -73,6 +73,7 @@ void SolverSettings::validate() const {
   requireRange("num_threads", num_threads, 0, 1024);
   requireAtLeast("tau", tau, 0.0);
   requireAtLeast("sigma", sigma, 0.0);
+  requireRange("step_balance", step_balance, 1e-3, 1e3);
   if ((tau > 0.0) != (sigma > 0.0)) {
     throw ParameterError(
         "settings tau and sigma: set both (> 0) or neither (0 = automatic)");

@@ -1037,6 +1037,13 @@ class SolverImpl {
       params.tau = params.sigma = params.sigma_data =
           static_cast<float>(0.99 / std::sqrt(K_norm2));
     }
+    if (settings_.tau <= 0.0) {
+      // The normals' and the duals' share of the step (tau * sigma kept).
+      const double b = settings_.step_balance;
+      params.tau = static_cast<float>(params.tau * b);
+      params.sigma = static_cast<float>(params.sigma / b);
+      params.sigma_data = static_cast<float>(params.sigma_data / b);
+    }
     return params;
   }
 

@@ -124,6 +124,8 @@ const std::map<std::string, Setter>& setters() {
       {"--tau", [](auto& o, auto& v, auto& s) { s.tau = parseDouble(o, v); }},
       {"--sigma",
        [](auto& o, auto& v, auto& s) { s.sigma = parseDouble(o, v); }},
+      {"--step-balance",
+       [](auto& o, auto& v, auto& s) { s.step_balance = parseDouble(o, v); }},
   };
   return table;
 }
@@ -235,6 +237,8 @@ void printSolverOptions(std::ostream& out, const SolverSettings& d) {
       << "  --preconditioning on|off  diagonal preconditioning ["
       << onOff(d.preconditioning) << "]\n"
       << "  --tau X, --sigma X    explicit step sizes, 0 = automatic\n"
+      << "  --step-balance X      automatic steps: tau * X, sigma / X ["
+      << d.step_balance << "]\n"
       << "  --threads N           0 = all hardware threads [" << d.num_threads
       << "]\n"
       << "  --adaptive-refine-threads on|off  local refinement on one thread "

@@ -74,6 +74,7 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.flag("preconditioning", solver.preconditioning);
   v.real("tau", solver.tau, 0.0, kInf);
   v.real("sigma", solver.sigma, 0.0, kInf);
+  v.real("step_balance", solver.step_balance, 1e-3, 1e3);
 
   // The node: inputs.
   v.integer("num_inputs", s.num_inputs, 1, kMaxInputs);

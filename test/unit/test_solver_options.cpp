@@ -42,6 +42,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   cli::applySolverOption("--backend", "reference", s);
   cli::applySolverOption("--tau", "0.1", s);
   cli::applySolverOption("--sigma", "0.2", s);
+  cli::applySolverOption("--step-balance", "0.5", s);
   EXPECT_EQ(s.lambda, 2.5);
   EXPECT_EQ(s.huber_eps, 0.01);
   EXPECT_EQ(s.penalty, DataPenalty::kSquaredL2);
@@ -72,6 +73,7 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   EXPECT_EQ(s.backend, SolverBackend::kReference);
   EXPECT_EQ(s.tau, 0.1);
   EXPECT_EQ(s.sigma, 0.2);
+  EXPECT_EQ(s.step_balance, 0.5);
   // The help text names every option with its default.
   std::ostringstream help;
   cli::printSolverOptions(help, SolverSettings());
@@ -79,7 +81,8 @@ TEST(SolverOptions, EachOptionSetsItsField) {
        {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
         "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
         "--density-power", "--local-radius", "--hole-link-weight",
-        "--adaptive-refine-threads", "--cold-start-budget-ms"}) {
+        "--adaptive-refine-threads", "--cold-start-budget-ms",
+        "--step-balance"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }
