@@ -154,9 +154,11 @@ struct SolverSettings {
   /// tau *= step_balance and every sigma /= step_balance; tau * sigma, and
   /// with it the convergence guarantee, are unchanged. Below 1 the duals
   /// take the larger steps. 1 = the steps above; in [1e-3, 1e3]; not applied
-  /// to explicit tau and sigma. 0.25 reaches 1e-3 of the converged energy
-  /// about 2.5x sooner than 1, and 1e-4 where 1 does not within 4000
-  /// iterations (bench_time_to_solution; docs/PERFORMANCE.md).
+  /// to explicit tau and sigma, nor to the warm start's local refinement
+  /// (which keeps 1: its duals start reset, its filled normals far off). 0.25
+  /// reaches 1e-3 of the converged energy about 2.5x sooner than 1, and 1e-4
+  /// where 1 does not within 4000 iterations (bench_time_to_solution;
+  /// docs/PERFORMANCE.md).
   double step_balance = 0.25;
 
   /// Throws ParameterError naming the first setting that is out of range.
