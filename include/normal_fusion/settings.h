@@ -156,10 +156,9 @@ struct SolverSettings {
   /// take the larger steps. 1 = the steps above; in [1e-3, 1e3]; not applied
   /// to explicit tau and sigma, nor to the warm start's local refinement and
   /// the pyramid's coarser levels, which keep 1 (their normals start far
-  /// from their solution: filled in, or cold). 0.25
-  /// reaches 1e-3 of the converged energy about 2.5x sooner than 1, and 1e-4
-  /// where 1 does not within 4000 iterations (bench_time_to_solution;
-  /// docs/PERFORMANCE.md).
+  /// from their solution: filled in, or cold). 0.25 reaches 1e-3 of the
+  /// converged energy about 2.5x sooner than 1, and 1e-4 where 1 does not
+  /// within 4000 iterations (bench_time_to_solution; docs/PERFORMANCE.md).
   double step_balance = 0.25;
 
   /// Throws ParameterError naming the first setting that is out of range.
