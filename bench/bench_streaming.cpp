@@ -22,6 +22,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <string>
 #include <thread>
 #include <vector>
@@ -264,6 +265,10 @@ int main(int argc, char** argv) {
   nf::TemporalAverage temporal_average;
   nf::Solver reference_solver(converged);
   nf::SolverState state, warp_scratch;
+  // The converged cold solves: their inner iterations, and how many stopped
+  // on the tolerance rather than on a cap.
+  int reference_min_its = std::numeric_limits<int>::max(),
+      reference_max_its = 0, references_converged = 0;
   nf::SolveReport report;
   double worst_ms = 0.0, worst_deficit = -1e9, sum_ms = 0.0, sum_deficit = 0.0;
   double worst_gap = -1e9;
@@ -337,7 +342,14 @@ int main(int argc, char** argv) {
     // A live frame: the warp of the state, then the solve.
     const double ms = warp_ms + solve_ms;
     const double psnr_live = nf::psnr(state.normals, sequence[k].normals_gt);
-    const nf::NormalMap best = reference_solver.solve(problem);
+    nf::SolveReport reference_report;
+    const nf::NormalMap best =
+        reference_solver.solve(problem, &reference_report);
+    reference_min_its =
+        std::min(reference_min_its, reference_report.inner_iterations);
+    reference_max_its =
+        std::max(reference_max_its, reference_report.inner_iterations);
+    if (reference_report.converged) ++references_converged;
     const double psnr_best = nf::psnr(best, sequence[k].normals_gt);
     const double deficit = psnr_best - psnr_live;
     worst_ms = std::max(worst_ms, ms);
@@ -399,6 +411,11 @@ int main(int argc, char** argv) {
   std::printf(
       "worst energy gap of the live map to the converged cold solve: %.3f %%\n",
       worst_gap);
+  std::printf(
+      "converged cold solves: %d - %d inner iterations, %d of %d stopped on "
+      "their tolerance (%g), the others on the cap (%d)\n",
+      reference_min_its, reference_max_its, references_converged, frames,
+      converged.relative_tolerance, converged.max_total_inner_iterations);
   for (std::size_t c = 0; c < continue_caps.size(); ++c) {
     std::printf(
         "live state solved on for %d more inner iterations at most: worst "
