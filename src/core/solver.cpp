@@ -850,7 +850,8 @@ class SolverImpl {
           "inputs: no valid observation in any input (all missing, zero weight "
           "or, in hard visibility mode, facing away from the camera)");
     }
-    stepSizes(L);  // throws on bad explicit steps before the state is touched
+    // Throws on bad explicit steps before the state is touched.
+    stepSizes(L, settings_.step_balance);
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
     report.filled_pixels = W * H - finest.valid_pixels;
@@ -1026,8 +1027,8 @@ class SolverImpl {
 
   /// Step sizes for L data terms; throws ParameterError when explicit steps
   /// break tau * sigma * (8 + L) < 1.
-  /// `balance` replaces settings_.step_balance when > 0.
-  InnerParams stepSizes(int num_inputs, double balance = -1.0) const {
+  /// `balance` scales the automatic steps (SolverSettings::step_balance).
+  InnerParams stepSizes(int num_inputs, double balance) const {
     InnerParams params;
     const double K_norm2 = 8.0 + num_inputs;
     if (settings_.tau > 0.0) {
@@ -1041,7 +1042,9 @@ class SolverImpl {
       }
       params.tau = static_cast<float>(settings_.tau);
       params.sigma = params.sigma_data = static_cast<float>(settings_.sigma);
-    } else if (settings_.preconditioning) {
+      return params;  // explicit steps are not balanced
+    }
+    if (settings_.preconditioning) {
       // Diagonal preconditioning (Pock & Chambolle 2011, alpha = 1): tau =
       // 1 / (column sums of |K|) = 1 / (4 + L), sigma = 1 / (row sums) = 1/2
       // for the differences and 1 for the data terms.
@@ -1052,19 +1055,15 @@ class SolverImpl {
       params.tau = params.sigma = params.sigma_data =
           static_cast<float>(0.99 / std::sqrt(K_norm2));
     }
-    if (settings_.tau <= 0.0) {
-      // The normals' and the duals' share of the step (tau * sigma kept).
-      const double b = balance > 0.0 ? balance : settings_.step_balance;
-      params.tau = static_cast<float>(params.tau * b);
-      params.sigma = static_cast<float>(params.sigma / b);
-      params.sigma_data = static_cast<float>(params.sigma_data / b);
-    }
+    // The normals' and the duals' share of the step (tau * sigma kept).
+    params.tau = static_cast<float>(params.tau * balance);
+    params.sigma = static_cast<float>(params.sigma / balance);
+    params.sigma_data = static_cast<float>(params.sigma_data / balance);
     return params;
   }
 
   /// Step sizes and model constants of the inner iterations at one level.
-  InnerParams innerParams(const PreparedLevel& level,
-                          double balance = -1.0) const {
+  InnerParams innerParams(const PreparedLevel& level, double balance) const {
     InnerParams params = stepSizes(level.num_inputs, balance);
     params.huber_eps = static_cast<float>(settings_.huber_eps);
     params.penalty = settings_.penalty;
@@ -1214,8 +1213,8 @@ class SolverImpl {
   /// n0, then n0 <- n / |n| when that lowers E (never raises it).
   void runLevel(const PreparedLevel& level, IterationState& s, bool finest,
                 SolveReport& report) {
-    const InnerParams params =
-        innerParams(level, finest ? -1.0 : kCoarseStepBalance);
+    const InnerParams params = innerParams(
+        level, finest ? settings_.step_balance : kCoarseStepBalance);
 
     auto energy_of = [&](const PlanarImage& n) {
       return settings_.backend == SolverBackend::kReference
