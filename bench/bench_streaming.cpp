@@ -53,6 +53,13 @@ nf::FusionProblem makeProblem(const nf::synthetic::Frame& frame, int index) {
   return problem;
 }
 
+/// Milliseconds since `start`.
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now() - start)
+      .count();
+}
+
 /// The share (0..1) of sum_i |a_i - b_i|^2 that the `fraction` of pixels
 /// with the largest differences hold: how concentrated the difference is.
 double shareOfLargestDifferences(const nf::NormalMap& a, const nf::NormalMap& b,
@@ -286,10 +293,7 @@ int main(int argc, char** argv) {
     const auto average_start = std::chrono::steady_clock::now();
     temporal_average.apply(live_problem.inputs, problem.K,
                            k == 0 ? nullptr : &R_cur_prev, temporal, threads);
-    const double average_ms =
-        std::chrono::duration<double, std::milli>(
-            std::chrono::steady_clock::now() - average_start)
-            .count();
+    const double average_ms = msSince(average_start);
     if (k == 0) {
       // Start-up frame: solved to convergence before the stream starts (or,
       // with --startup live, as a stream's first frame with the live
@@ -315,10 +319,7 @@ int main(int argc, char** argv) {
         state, problem.K, R_cur_prev, warp_scratch, threads,
         reset_duals == 1 ? nf::DualWarp::kReset : nf::DualWarp::kRotate);
     // The inputs' averaging counts as part of the warp.
-    const double warp_ms =
-        average_ms + std::chrono::duration<double, std::milli>(
-                         std::chrono::steady_clock::now() - warp_start)
-                         .count();
+    const double warp_ms = average_ms + msSince(warp_start);
     // What the warm start predicts (uncovered pixels skipped), and the same
     // warp applied to the previous frame's exact normals: the floor a
     // rotation-only warp leaves (edge blending, and the camera's translation,
@@ -336,9 +337,7 @@ int main(int argc, char** argv) {
         start - std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                     std::chrono::duration<double, std::milli>(warp_ms)));
     live_solver.solve(live_problem, state, warm_start, report);
-    const double solve_ms = std::chrono::duration<double, std::milli>(
-                                std::chrono::steady_clock::now() - start)
-                                .count();
+    const double solve_ms = msSince(start);
     // A live frame: the warp of the state, then the solve.
     const double ms = warp_ms + solve_ms;
     const double psnr_live = nf::psnr(state.normals, sequence[k].normals_gt);
