@@ -111,6 +111,11 @@ struct CameraIntrinsics {
 
   /// Throws InputError when K has non-finite entries or is singular.
   void validate() const;
+  /// validate(), and the viewing rays K^-1 (u, v, 1) of the corners of a
+  /// width x height image no farther than 89.99 degrees off the optical axis
+  /// (|x / z|, |y / z| <= 1e4), so that every pixel's ray stays finite in
+  /// single precision. Throws InputError saying which bound failed.
+  void validateForImage(int width, int height) const;
   /// K^-1 (row-major). Calls validate().
   std::array<double, 9> inverse() const;
   /// Intrinsics of the same camera at an image scaled by (sx, sy), with the

@@ -47,7 +47,9 @@ int resolveThreadCount(int num_threads) {
 void SolverSettings::validate() const {
   requireAtLeast("lambda", lambda, 0.0);
   requireAtLeast("huber_eps", huber_eps, 0.0);
-  requireAtLeast("edges.smoothing_sigma", edges.smoothing_sigma, 0.0);
+  // The guide's pre-smoothing costs 6 sigma + 1 taps per pixel: beyond 10 px
+  // it would take seconds per frame and blur every edge away.
+  requireRange("edges.smoothing_sigma", edges.smoothing_sigma, 0.0, 10.0);
   requireAtLeast("edges.alpha", edges.alpha, 0.0);
   requireAtLeast("edges.beta", edges.beta, 0.0);
   requireRange("edges.w_min", edges.w_min, 0.0, 1.0);

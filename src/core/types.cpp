@@ -49,6 +49,34 @@ void CameraIntrinsics::validate() const {
   }
 }
 
+void CameraIntrinsics::validateForImage(int width, int height) const {
+  validate();
+  const std::array<double, 9> Kinv = inverse();
+  // Beyond this the rays of the edge pixels overflow what the solver's float
+  // arithmetic can normalize.
+  constexpr double kMaxSlope = 1e4;
+  const double us[2] = {-0.5, width - 0.5}, vs[2] = {-0.5, height - 0.5};
+  for (double u : us) {
+    for (double v : vs) {
+      const double x = Kinv[0] * u + Kinv[1] * v + Kinv[2];
+      const double y = Kinv[3] * u + Kinv[4] * v + Kinv[5];
+      const double z = Kinv[6] * u + Kinv[7] * v + Kinv[8];
+      const double sx = x / z, sy = y / z;
+      if (!(z > 0.0) || !std::isfinite(sx) || !std::isfinite(sy) ||
+          std::abs(sx) > kMaxSlope || std::abs(sy) > kMaxSlope) {
+        std::ostringstream msg;
+        msg << "camera intrinsics: the ray of pixel (" << u << ", " << v
+            << ") of a " << width << "x" << height << " image is (" << x << ", "
+            << y << ", " << z << ") (fx = " << K[0] << ", fy = " << K[4]
+            << ", cx = " << K[2] << ", cy = " << K[5]
+            << "); expected z > 0 and |x / z|, |y / z| <= " << kMaxSlope
+            << " (a focal length and principal point that fit the image)";
+        throw InputError(msg.str());
+      }
+    }
+  }
+}
+
 std::array<double, 9> CameraIntrinsics::inverse() const {
   validate();
   const auto& m = K;

@@ -55,7 +55,7 @@ std::string sizeText(int width, int height) {
 
 /// A checked view of the message as a cv::Mat (no copy).
 cv::Mat viewOf(const sensor_msgs::Image& msg, const std::string& topic) {
-  checkImageLayout(msg, topic);
+  checkImageLayout(msg, topic, MessageLimits{0});
   try {
     return cv_bridge::toCvShare(msg, nullptr)->image;
   } catch (const cv_bridge::Exception& e) {
@@ -77,35 +77,119 @@ void requireEncoding(const sensor_msgs::Image& msg, const std::string& topic,
 
 }  // namespace
 
-void checkImageLayout(const sensor_msgs::Image& msg, const std::string& topic) {
+namespace {
+
+/// One rule of the arrival checks: empty when the message passes, else what
+/// was expected and what came (without the topic, which the caller adds).
+template <typename Subject>
+struct Rule {
+  const char* name;
+  std::string (*check)(const Subject&, const MessageLimits&);
+};
+
+std::string checkStampZero(const std_msgs::Header& h, const MessageLimits&) {
+  return h.stamp.isZero() ? "the stamp is zero; expected the capture time"
+                          : std::string();
+}
+
+std::string checkStampNormalized(const std_msgs::Header& h,
+                                 const MessageLimits&) {
+  if (h.stamp.nsec < 1000000000u) return std::string();
+  return "stamp nsec = " + std::to_string(h.stamp.nsec) +
+         " is not normalized; expected nsec < 1000000000";
+}
+
+const Rule<std_msgs::Header> kHeaderRules[] = {
+    {"stamp zero", checkStampZero},
+    {"stamp normalized", checkStampNormalized},
+};
+
+std::string checkEncoding(const sensor_msgs::Image& msg, const MessageLimits&) {
   EncodingInfo info;
-  if (!lookupEncoding(msg.encoding, &info)) {
-    throw InputError(topic + ": unsupported encoding '" + msg.encoding + "'");
-  }
+  return lookupEncoding(msg.encoding, &info)
+             ? std::string()
+             : "unsupported encoding '" + msg.encoding + "'";
+}
+
+std::string checkMinimumSize(const sensor_msgs::Image& msg,
+                             const MessageLimits&) {
   if (msg.width == 0 || msg.height == 0) {
-    throw InputError(topic + ": expected a non-empty image, got " +
-                     sizeText(msg.width, msg.height));
+    return "expected a non-empty image, got " + sizeText(msg.width, msg.height);
   }
-  const std::size_t row_bytes = static_cast<std::size_t>(msg.width) *
-                                info.channels * info.bytes_per_channel;
-  if (msg.step < row_bytes) {
-    std::ostringstream text;
-    text << topic << ": step " << msg.step << " is shorter than a row of "
-         << msg.width << " " << msg.encoding << " pixels (" << row_bytes
-         << " bytes)";
-    throw InputError(text.str());
+  return std::string();
+}
+
+std::string checkMaximumSize(const sensor_msgs::Image& msg,
+                             const MessageLimits& limits) {
+  const std::uint64_t pixels =
+      static_cast<std::uint64_t>(msg.width) * msg.height;
+  if (limits.max_pixels == 0 || pixels <= limits.max_pixels) {
+    return std::string();
   }
-  if (static_cast<std::size_t>(msg.height) * msg.step != msg.data.size()) {
-    std::ostringstream text;
-    text << topic << ": expected height * step = " << msg.height << " * "
-         << msg.step << " = " << static_cast<std::size_t>(msg.height) * msg.step
-         << " bytes of data, got " << msg.data.size();
-    throw InputError(text.str());
+  std::ostringstream text;
+  text << "a " << msg.width << "x" << msg.height << " image (" << pixels
+       << " pixels) is larger than max_pixels = " << limits.max_pixels
+       << "; frame refused before any allocation";
+  return text.str();
+}
+
+std::string checkStep(const sensor_msgs::Image& msg, const MessageLimits&) {
+  EncodingInfo info;
+  lookupEncoding(msg.encoding, &info);
+  const std::uint64_t row_bytes = static_cast<std::uint64_t>(msg.width) *
+                                  info.channels * info.bytes_per_channel;
+  if (msg.step >= row_bytes) return std::string();
+  std::ostringstream text;
+  text << "step " << msg.step << " is shorter than a row of " << msg.width
+       << " " << msg.encoding << " pixels (" << row_bytes << " bytes)";
+  return text.str();
+}
+
+std::string checkDataSize(const sensor_msgs::Image& msg, const MessageLimits&) {
+  const std::uint64_t expected =
+      static_cast<std::uint64_t>(msg.height) * msg.step;
+  if (expected == msg.data.size()) return std::string();
+  std::ostringstream text;
+  text << "expected height * step = " << msg.height << " * " << msg.step
+       << " = " << expected << " bytes of data, got " << msg.data.size();
+  return text.str();
+}
+
+std::string checkEndianness(const sensor_msgs::Image& msg,
+                            const MessageLimits&) {
+  EncodingInfo info;
+  lookupEncoding(msg.encoding, &info);
+  if (!msg.is_bigendian || info.bytes_per_channel == 1) return std::string();
+  return "big-endian " + msg.encoding +
+         " data is not supported; expected little-endian";
+}
+
+// In this order: each rule may rely on the ones before it (a known encoding,
+// a size within the limits).
+const Rule<sensor_msgs::Image> kImageRules[] = {
+    {"encoding", checkEncoding},        {"minimum size", checkMinimumSize},
+    {"maximum size", checkMaximumSize}, {"step", checkStep},
+    {"data size", checkDataSize},       {"endianness", checkEndianness},
+};
+
+template <typename Subject, std::size_t N>
+void applyRules(const Rule<Subject> (&rules)[N], const Subject& subject,
+                const MessageLimits& limits, const std::string& topic) {
+  for (const Rule<Subject>& rule : rules) {
+    const std::string problem = rule.check(subject, limits);
+    if (!problem.empty()) throw InputError(topic + ": " + problem);
   }
-  if (msg.is_bigendian && info.bytes_per_channel > 1) {
-    throw InputError(topic + ": big-endian " + msg.encoding +
-                     " data is not supported; expected little-endian");
-  }
+}
+
+}  // namespace
+
+void checkImageLayout(const sensor_msgs::Image& msg, const std::string& topic,
+                      const MessageLimits& limits) {
+  applyRules(kImageRules, msg, limits, topic);
+}
+
+void checkHeader(const std_msgs::Header& header, const std::string& topic) {
+  applyRules(kHeaderRules, header, MessageLimits(), topic);
 }
 
 void imageFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
@@ -259,34 +343,73 @@ void confidenceFromMessage(const sensor_msgs::Image& msg,
   }
 }
 
+namespace {
+
+/// A camera_info with the size of the image it must describe.
+struct CameraInfoForImage {
+  const sensor_msgs::CameraInfo& msg;
+  int width, height;
+};
+
+std::string checkKFinite(const CameraInfoForImage& c, const MessageLimits&) {
+  for (int i = 0; i < 9; ++i) {
+    if (!std::isfinite(c.msg.K[i])) {
+      return "K[" + std::to_string(i) + "] is not finite; expected a finite K";
+    }
+  }
+  return std::string();
+}
+
+std::string checkKShape(const CameraInfoForImage& c, const MessageLimits&) {
+  const auto& K = c.msg.K;
+  if (K[0] > 0.0 && K[4] > 0.0 && K[8] == 1.0 && K[6] == 0.0 && K[7] == 0.0) {
+    return std::string();
+  }
+  std::ostringstream text;
+  text << "expected K with fx, fy > 0 and last row (0, 0, 1), got"
+       << " fx = " << K[0] << ", fy = " << K[4] << ", last row (" << K[6]
+       << ", " << K[7] << ", " << K[8] << ")";
+  return text.str();
+}
+
+std::string checkInfoSize(const CameraInfoForImage& c, const MessageLimits&) {
+  if ((c.msg.width == 0 && c.msg.height == 0) ||
+      (static_cast<int>(c.msg.width) == c.width &&
+       static_cast<int>(c.msg.height) == c.height)) {
+    return std::string();
+  }
+  return "camera_info is for a " + sizeText(c.msg.width, c.msg.height) +
+         " image; expected the image's size " + sizeText(c.width, c.height);
+}
+
+std::string checkKRays(const CameraInfoForImage& c, const MessageLimits&) {
+  CameraIntrinsics K;
+  for (int i = 0; i < 9; ++i) K.K[i] = c.msg.K[i];
+  try {
+    K.validateForImage(c.width, c.height);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return std::string();
+}
+
+const Rule<CameraInfoForImage> kCameraInfoRules[] = {
+    {"K finite", checkKFinite},
+    {"K shape", checkKShape},
+    {"camera_info size", checkInfoSize},
+    {"K rays", checkKRays},
+};
+
+}  // namespace
+
 CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
                                           const std::string& topic,
                                           int image_width, int image_height) {
-  for (int i = 0; i < 9; ++i) {
-    if (!std::isfinite(msg.K[i])) {
-      throw InputError(topic + ": K[" + std::to_string(i) +
-                       "] is not finite; expected a finite K");
-    }
-  }
-  if (!(msg.K[0] > 0.0) || !(msg.K[4] > 0.0) || msg.K[8] != 1.0 ||
-      msg.K[6] != 0.0 || msg.K[7] != 0.0) {
-    std::ostringstream text;
-    text << topic << ": expected K with fx, fy > 0 and last row (0, 0, 1), got"
-         << " fx = " << msg.K[0] << ", fy = " << msg.K[4] << ", last row ("
-         << msg.K[6] << ", " << msg.K[7] << ", " << msg.K[8] << ")";
-    throw InputError(text.str());
-  }
-  if ((msg.width != 0 || msg.height != 0) &&
-      (static_cast<int>(msg.width) != image_width ||
-       static_cast<int>(msg.height) != image_height)) {
-    throw InputError(topic + ": camera_info is for a " +
-                     sizeText(msg.width, msg.height) +
-                     " image; expected the image's size " +
-                     sizeText(image_width, image_height));
-  }
+  applyRules(kCameraInfoRules,
+             CameraInfoForImage{msg, image_width, image_height},
+             MessageLimits(), topic);
   CameraIntrinsics K;
   for (int i = 0; i < 9; ++i) K.K[i] = msg.K[i];
-  K.validate();
   return K;
 }
 
@@ -497,6 +620,14 @@ void normalsToVisMessage(const NormalMap& normals,
                                : 0;
     }
   }
+}
+
+std::vector<std::string> inputRuleNames() {
+  std::vector<std::string> names;
+  for (const auto& rule : kHeaderRules) names.push_back(rule.name);
+  for (const auto& rule : kImageRules) names.push_back(rule.name);
+  for (const auto& rule : kCameraInfoRules) names.push_back(rule.name);
+  return names;
 }
 
 }  // namespace node

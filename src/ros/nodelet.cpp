@@ -16,6 +16,9 @@ namespace node {
 namespace {
 
 constexpr double kLogPeriodS = 5.0;
+// Diagnostics: this many errors within the window is ERROR, fewer WARN.
+constexpr double kErrorWindowS = 5.0;
+constexpr int kRepeatedErrors = 3;
 
 /// Every known parameter present under the private namespace, typed as the
 /// parameter server holds it, plus any other scalar there (reported as
@@ -151,6 +154,9 @@ void NormalFusionNodelet::onInit() {
   static_params_ = known;
   num_inputs_ = settings_.num_inputs;
   queue_size_ = settings_.queue_size;
+  limits_.max_pixels = static_cast<std::uint64_t>(settings_.max_pixels);
+  rate_min_ = settings_.expected_rate_min;
+  rate_max_ = settings_.expected_rate_max;
 
   roles_ = topicRoles(settings_);
   for (TopicRole& role : roles_) role.name = nh.resolveName(role.name);
@@ -179,16 +185,27 @@ void NormalFusionNodelet::onInit() {
   worker_ = std::thread([this] { workerLoop(); });
 
   updater_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-  updater_->setHardwareID("none");
+  // The node's name until the first image names its camera frame.
+  updater_->setHardwareID(getName());
   updater_->add("normal_fusion",
                 [this](diagnostic_updater::DiagnosticStatusWrapper& status) {
                   diagnose(status);
                 });
-  timer_ = nh.createWallTimer(ros::WallDuration(1.0),
-                              [this](const ros::WallTimerEvent&) {
-                                updater_->update();
-                                checkMissingInputs();
-                              });
+  output_rate_ = std::make_unique<diagnostic_updater::FrequencyStatus>(
+      diagnostic_updater::FrequencyStatusParam(&rate_min_, &rate_max_, 0.1, 5),
+      "fused_normals output rate");
+  updater_->add(*output_rate_);
+  timer_ = nh.createWallTimer(
+      ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+        {
+          std::lock_guard<std::mutex> lock(stats_mutex_);
+          if (!camera_frame_.empty()) {
+            updater_->setHardwareID(camera_frame_);
+          }
+        }
+        updater_->update();
+        checkMissingInputs();
+      });
 
   // Publishers; the lock keeps connectCb from running before all exist.
   std::lock_guard<std::mutex> lock(connect_mutex_);
@@ -303,7 +320,23 @@ void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
                                     const QueuedMessage& message) {
   const TopicRole& role = roles_[topic];
   try {
-    precheckMessage(role.name, header, message.image.get());
+    handleMessage(topic, header, message);
+  } catch (const std::exception& e) {
+    // Whatever a message does, the callback thread (and with it the node or
+    // the nodelet manager) survives it.
+    ++frames_skipped_;
+    const std::string text = role.name + ": " + e.what() + "; message skipped";
+    recordError(text);
+    logThrottled(true, text);
+  }
+}
+
+void NormalFusionNodelet::handleMessage(int topic,
+                                        const std_msgs::Header& header,
+                                        const QueuedMessage& message) {
+  const TopicRole& role = roles_[topic];
+  try {
+    precheckMessage(role.name, header, message.image.get(), limits_);
   } catch (const Error& e) {
     ++frames_skipped_;
     recordError(e.what());
@@ -315,22 +348,28 @@ void NormalFusionNodelet::onMessage(int topic, const std_msgs::Header& header,
   {
     std::lock_guard<std::mutex> lock(sync_mutex_);
     last_arrival_[topic] = ros::WallTime::now();
+    const std::int64_t newest = sync_->newestStamp(topic);
     const auto result = sync_->add(topic, header.stamp.toNSec(), message);
     if (result == Synchronizer::AddResult::kOutOfOrder) {
       std::ostringstream text;
       text << role.name << ": stamp " << header.stamp
-           << " is not newer than the previous one on this topic "
-              "(out of order); message skipped";
+           << " repeats the previous one on this topic (a duplicate); "
+              "message skipped";
       ++frames_skipped_;
       recordError(text.str());
       logThrottled(true, text.str());
       return;
     }
     if (result == Synchronizer::AddResult::kTimeReset) {
-      logThrottled(false, role.name +
-                              ": time jumped back by more than 1 s (a bag "
-                              "loop or a restarted player); synchronizer "
-                              "reset");
+      NODELET_INFO(
+          "%s: time went back by %.3f s (a bag loop or a restarted player): "
+          "synchronizer and stream reset",
+          role.name.c_str(),
+          1e-9 * static_cast<double>(newest - static_cast<std::int64_t>(
+                                                  header.stamp.toNSec())));
+      std::lock_guard<std::mutex> work_lock(work_mutex_);
+      pending_.reset();  // a set of the old timeline
+      stream_reset_ = true;
     }
     sets = sync_->poll();
     if (!sets.empty()) last_set_time_ = ros::WallTime::now();
@@ -379,7 +418,13 @@ void NormalFusionNodelet::configCb(Config& config, uint32_t /*level*/) {
   ParameterMap params = static_params_;
   mergeConfigMessage(msg, &params);
   std::vector<std::string> warnings;
-  NodeSettings settings = settingsFromParameters(params, &warnings);
+  NodeSettings current;
+  {
+    std::lock_guard<std::mutex> lock(settings_mutex_);
+    current = settings_;
+  }
+  // A refused value keeps the value in use, and every other setting stays.
+  NodeSettings settings = settingsFromParameters(params, &warnings, current);
   // The start-time parameters keep their start values.
   {
     std::lock_guard<std::mutex> lock(settings_mutex_);
@@ -414,6 +459,7 @@ void NormalFusionNodelet::workerLoop() {
   while (true) {
     InputSet set;
     ros::WallTime formed;
+    bool reset = false;
     {
       std::unique_lock<std::mutex> lock(work_mutex_);
       work_cv_.wait(lock, [this] { return stop_ || pending_.has_value(); });
@@ -421,7 +467,11 @@ void NormalFusionNodelet::workerLoop() {
       set = std::move(*pending_);
       pending_.reset();
       formed = pending_formed_;
+      reset = stream_reset_;
+      stream_reset_ = false;
     }
+    const ros::WallTime started = ros::WallTime::now();
+    if (reset) pipeline_->resetWarmStart();
     std::string fixed_frame;
     double tf_timeout = 0.0;
     {
@@ -455,6 +505,18 @@ void NormalFusionNodelet::workerLoop() {
     try {
       pipeline_->process(set, rotation, pub_vis_.getNumSubscribers() > 0,
                          &output);
+    } catch (const std::bad_alloc&) {
+      pipeline_->resetWarmStart();
+      ++frames_skipped_;
+      std::ostringstream text;
+      text << roles_[0].name << ": out of memory for a "
+           << (set.image ? set.image->width : 0u) << "x"
+           << (set.image ? set.image->height : 0u)
+           << " frame (std::bad_alloc); frame skipped (max_pixels bounds the "
+              "frame size)";
+      recordError(text.str());
+      logThrottled(true, text.str());
+      continue;
     } catch (const std::exception& e) {
       ++frames_skipped_;
       recordError(e.what());
@@ -464,15 +526,21 @@ void NormalFusionNodelet::workerLoop() {
     if (!output.warning.empty()) logThrottled(false, output.warning);
     if (!output.note.empty()) NODELET_INFO("%s", output.note.c_str());
     ++frames_processed_;
-    const double latency = (ros::WallTime::now() - formed).toSec();
+    const ros::WallTime done = ros::WallTime::now();
+    const double latency = (done - formed).toSec();
+    output.stats->queue_time = (started - formed).toSec();
     output.stats->latency = latency;
     output.stats->frames_dropped = frames_dropped_;
     output.stats->frames_skipped = frames_skipped_;
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
-      recent_outputs_.emplace_back(ros::WallTime::now(), latency);
+      if (set.image && !set.image->header.frame_id.empty()) {
+        camera_frame_ = set.image->header.frame_id;
+      }
+      recent_outputs_.emplace_back(done, latency);
       while (recent_outputs_.size() > 100) recent_outputs_.pop_front();
       last_solve_time_ = output.stats->solve_time;
+      last_output_time_ = done;
     }
     publishOutputs(output);
   }
@@ -482,12 +550,15 @@ void NormalFusionNodelet::publishOutputs(const PipelineOutput& output) {
   if (pub_fused_.getNumSubscribers() > 0) pub_fused_.publish(output.fused);
   if (output.fused_vis) pub_vis_.publish(output.fused_vis);
   pub_stats_.publish(output.stats);
+  output_rate_->tick();
 }
 
 void NormalFusionNodelet::recordError(const std::string& text) {
   std::lock_guard<std::mutex> lock(stats_mutex_);
   last_error_ = text;
   last_error_time_ = ros::WallTime::now();
+  recent_errors_.push_back(last_error_time_);
+  while (recent_errors_.size() > 100) recent_errors_.pop_front();
 }
 
 void NormalFusionNodelet::logThrottled(bool is_error, const std::string& text) {
@@ -571,6 +642,24 @@ void NormalFusionNodelet::checkMissingInputs() {
 
 void NormalFusionNodelet::diagnose(
     diagnostic_updater::DiagnosticStatusWrapper& status) {
+  // The other locks first: stats_mutex_ is taken inside sync_mutex_ elsewhere.
+  bool subscribed = false;
+  ros::WallTime since;
+  {
+    std::lock_guard<std::mutex> connect_lock(connect_mutex_);
+    subscribed = subscribed_;
+  }
+  {
+    std::lock_guard<std::mutex> sync_lock(sync_mutex_);
+    since = subscribed_since_;
+  }
+  double stale_after = 5.0;
+  {
+    std::lock_guard<std::mutex> settings_lock(settings_mutex_);
+    if (settings_.missing_input_timeout > 0.0) {
+      stale_after = settings_.missing_input_timeout;
+    }
+  }
   std::lock_guard<std::mutex> lock(stats_mutex_);
   const ros::WallTime now = ros::WallTime::now();
   int recent = 0;
@@ -583,10 +672,26 @@ void NormalFusionNodelet::diagnose(
   }
   const double rate = recent / 5.0;
   const double latency = recent > 0 ? latency_sum / recent : 0.0;
-  const bool recent_error =
-      !last_error_time_.isZero() && (now - last_error_time_).toSec() < 5.0;
-  if (recent_error) {
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_error_);
+  int errors = 0;
+  for (const ros::WallTime& t : recent_errors_) {
+    if ((now - t).toSec() < kErrorWindowS) ++errors;
+  }
+  const ros::WallTime last = std::max(last_output_time_, since);
+  const double quiet = subscribed ? (now - last).toSec() : 0.0;
+  if (errors >= kRepeatedErrors) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR,
+                   "repeated bad input (" + std::to_string(errors) +
+                       " errors in " + std::to_string(int(kErrorWindowS)) +
+                       " s): " + last_error_);
+  } else if (errors > 0) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, last_error_);
+  } else if (subscribed && quiet > stale_after) {
+    std::ostringstream text;
+    text << "stale: subscribed, but no output for " << quiet << " s";
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, text.str());
+  } else if (!subscribed) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK,
+                   "idle: no subscriber to the outputs");
   } else if (frames_processed_ == 0) {
     status.summary(diagnostic_msgs::DiagnosticStatus::OK,
                    "no frame processed yet");

@@ -49,7 +49,7 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.real("hole_link_weight", solver.hole_link_weight, 1e-6, 1.0);
   // Edge weights.
   v.flag("edge_enabled", solver.edges.enabled);
-  v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, kInf);
+  v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, 10.0);
   v.real("edge_alpha", solver.edges.alpha, 0.0, kInf);
   v.real("edge_beta", solver.edges.beta, 0.0, kInf);
   v.real("edge_w_min", solver.edges.w_min, 0.0, 1.0);
@@ -92,6 +92,9 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.integer("queue_size", s.queue_size, 1, 1000);
   v.real("max_interval", s.max_interval, 0.0, 3600.0);
   v.real("missing_input_timeout", s.missing_input_timeout, 0.0, 1e6);
+  v.integer("max_pixels", s.max_pixels, 4, kIntMax);
+  v.real("expected_rate_min", s.expected_rate_min, 0.0, 1e4);
+  v.real("expected_rate_max", s.expected_rate_max, 0.0, 1e4);
   // Warm start.
   v.flag("warm_start", s.warm_start);
   v.real("warm_start_max_gap", s.warm_start_max_gap, 0.0, 1e6);
@@ -144,16 +147,15 @@ class Reader {
           it, field,
           "expected a number, got a " + std::string(typeName(it->second)));
     }
-    if (std::isnan(value)) return replace(it, field, "expected a number");
+    // Refused values keep the value in use: a bound may mean "off" (a time
+    // budget of 0), so clamping to it would change what the node does.
+    if (!std::isfinite(value)) {
+      return replace(it, field, "expected a finite number");
+    }
     if (value < lo || value > hi) {
-      const double clamped = std::min(std::max(value, lo), hi);
-      if (!std::isfinite(clamped)) {
-        return replace(it, field, "expected a finite number");
-      }
       return replace(
-          it, clamped,
-          "out of range [" + numberText(lo) + ", " + numberText(hi) + "]",
-          &field);
+          it, field,
+          "out of range [" + numberText(lo) + ", " + numberText(hi) + "]");
     }
     field = value;
     it->second = value;
@@ -200,9 +202,11 @@ class Reader {
       }
       value = std::llround(*d);
       if (static_cast<double>(value) != *d) {
-        const int rounded = static_cast<int>(
-            std::min<long long>(std::max<long long>(value, lo), hi));
-        return replace(it, rounded, "expected an integer", &field);
+        if (value < lo || value > hi) {
+          return replace(it, field, "expected an integer in range");
+        }
+        return replace(it, static_cast<int>(value), "expected an integer",
+                       &field);
       }
     } else {
       return replace(
@@ -210,12 +214,9 @@ class Reader {
           "expected an integer, got a " + std::string(typeName(it->second)));
     }
     if (value < lo || value > hi) {
-      const int clamped = static_cast<int>(
-          std::min<long long>(std::max<long long>(value, lo), hi));
-      return replace(it, clamped,
+      return replace(it, field,
                      "out of range [" + std::to_string(lo) + ", " +
-                         std::to_string(hi) + "]",
-                     &field);
+                         std::to_string(hi) + "]");
     }
     field = static_cast<int>(value);
     it->second = field;
@@ -341,7 +342,8 @@ class Writer {
 
 bool isDynamicParameter(const std::string& name) {
   if (name == "num_inputs" || name == "approximate_sync" ||
-      name == "queue_size") {
+      name == "queue_size" || name == "max_pixels" ||
+      name == "expected_rate_min" || name == "expected_rate_max") {
     return false;
   }
   return name.rfind("use_confidence_", 0) != 0 &&
@@ -356,9 +358,13 @@ ParameterMap parametersFromSettings(const NodeSettings& settings) {
   return params;
 }
 
-NodeSettings settingsFromParameters(ParameterMap& params,
-                                    std::vector<std::string>* warnings) {
-  NodeSettings settings;
+namespace {
+
+/// The visitors' pass and the step-pair rule: every value checked on its own.
+NodeSettings readSettings(ParameterMap& params,
+                          std::vector<std::string>* warnings,
+                          const NodeSettings& base) {
+  NodeSettings settings = base;
   Reader reader(params, warnings);
   visitParameters(settings, reader);
   reader.reportUnknown();
@@ -384,17 +390,53 @@ NodeSettings settingsFromParameters(ParameterMap& params,
     params["tau"] = 0.0;
     params["sigma"] = 0.0;
   }
-  // The library's own check, for any rule the list above does not know.
-  try {
-    solver.validate();
-  } catch (const Error& e) {
-    reader.warn(std::string("solver settings rejected (") + e.what() +
-                "); using the library's defaults for all solver settings");
-    settings.solver = SolverSettings();
-    const ParameterMap corrected = parametersFromSettings(settings);
-    for (const auto& entry : corrected) params[entry.first] = entry.second;
-  }
   return settings;
+}
+
+bool solverAccepts(const NodeSettings& settings, std::string* why) {
+  try {
+    settings.solver.validate();
+    settings.temporal.validate();
+  } catch (const Error& e) {
+    *why = e.what();
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+NodeSettings settingsFromParameters(ParameterMap& params,
+                                    std::vector<std::string>* warnings,
+                                    const NodeSettings& base) {
+  NodeSettings settings = readSettings(params, warnings, base);
+  std::string why;
+  if (solverAccepts(settings, &why)) return settings;
+  // A combination the per-value ranges do not know: the one parameter whose
+  // base value makes the settings valid again is refused; the rest stay.
+  const ParameterMap base_params = parametersFromSettings(base);
+  for (const auto& entry : base_params) {
+    auto it = params.find(entry.first);
+    if (it == params.end() || it->second == entry.second) continue;
+    ParameterMap trial = params;
+    trial[entry.first] = entry.second;
+    const NodeSettings candidate = readSettings(trial, nullptr, base);
+    std::string ignored;
+    if (!solverAccepts(candidate, &ignored)) continue;
+    if (warnings != nullptr) {
+      warnings->push_back("parameter '" + entry.first +
+                          "' = " + toString(it->second) + ": rejected (" + why +
+                          "); using " + toString(entry.second));
+    }
+    params = trial;
+    return candidate;
+  }
+  if (warnings != nullptr) {
+    warnings->push_back(std::string("solver settings rejected (") + why +
+                        "); using the previous values of all parameters");
+  }
+  params = base_params;
+  return base;
 }
 
 ParameterMap parametersFromYamlFile(const std::string& path,

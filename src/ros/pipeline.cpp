@@ -107,11 +107,17 @@ TopicNames topicNamesOf(const std::vector<TopicRole>& roles, int num_inputs) {
 }
 
 void precheckMessage(const std::string& topic, const std_msgs::Header& header,
-                     const sensor_msgs::Image* image) {
-  if (header.stamp.isZero()) {
-    throw InputError(topic + ": the stamp is zero; expected the capture time");
-  }
-  if (image != nullptr) checkImageLayout(*image, topic);
+                     const sensor_msgs::Image* image,
+                     const MessageLimits& limits) {
+  checkHeader(header, topic);
+  if (image != nullptr) checkImageLayout(*image, topic, limits);
+}
+
+double secondsBetween(const ros::Time& later, const ros::Time& earlier) {
+  // In integer nanoseconds: ros::Duration throws beyond 2^31 s.
+  return 1e-9 *
+         static_cast<double>(static_cast<std::int64_t>(later.toNSec()) -
+                             static_cast<std::int64_t>(earlier.toNSec()));
 }
 
 RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
@@ -145,6 +151,44 @@ RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
     }
   };
 }
+
+namespace {
+
+/// Inputs must be in the image's camera frame; an empty frame_id is taken as
+/// "the same" (hand-written publishers often leave it empty).
+void requireImageFrame(const std_msgs::Header& header,
+                       const std::string& image_frame, const std::string& topic,
+                       const char* what) {
+  if (header.frame_id.empty() || image_frame.empty() ||
+      header.frame_id == image_frame) {
+    return;
+  }
+  throw InputError(topic + ": frame_id '" + header.frame_id +
+                   "' differs from the image's '" + image_frame +
+                   "'; expected " + what + " in the image's camera frame");
+}
+
+/// The number of pixels of `normals` that are not finite unit vectors.
+std::size_t nonUnitPixels(const NormalMap& normals) {
+  std::size_t bad = 0;
+  const std::size_t n = normals.pixelCount();
+  const float* x = normals.plane(0);
+  const float* y = normals.plane(1);
+  const float* z = normals.plane(2);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float length2 = x[i] * x[i] + y[i] * y[i] + z[i] * z[i];
+    // NaN fails the comparison and counts as bad.
+    bad += !(std::abs(length2 - 1.0f) <= 1e-3f);
+  }
+  return bad;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
+}  // namespace
 
 FusionPipeline::FusionPipeline(const NodeSettings& settings,
                                const TopicNames& topics)
@@ -205,7 +249,7 @@ bool FusionPipeline::canWarmStart(const CameraIntrinsics& K,
   // The gap the previous set's own processing opened does not count: after
   // a long solve (a stream's converged start) the next set solved is the
   // newest, its stamp that much later.
-  const double gap = (stamp - previous_stamp_).toSec();
+  const double gap = secondsBetween(stamp, previous_stamp_);
   if (gap > settings_.warm_start_max_gap + previous_seconds_) {
     std::ostringstream text;
     text << "stamp gap " << gap << " s exceeds warm_start_max_gap plus the "
@@ -232,6 +276,13 @@ void FusionPipeline::process(const InputSet& set,
   const sensor_msgs::Image& image_msg = *set.image;
   const std::string& frame_id = image_msg.header.frame_id;
   const ros::Time stamp = image_msg.header.stamp;
+  requireImageFrame(set.camera_info->header, frame_id, topics_.camera_info,
+                    "the camera_info");
+  if (image_msg.width < 2 || image_msg.height < 2) {
+    throw InputError(topics_.image + ": expected at least 2x2 pixels, got " +
+                     std::to_string(image_msg.width) + "x" +
+                     std::to_string(image_msg.height));
+  }
 
   // Guide image and intrinsics.
   imageFromMessage(image_msg, topics_.image, problem_.image);
@@ -259,12 +310,7 @@ void FusionPipeline::process(const InputSet& set,
       continue;
     }
     const std::string& topic = topics_.normals[i];
-    if (!normals_msg->header.frame_id.empty() && !frame_id.empty() &&
-        normals_msg->header.frame_id != frame_id) {
-      throw InputError(topic + ": frame_id '" + normals_msg->header.frame_id +
-                       "' differs from the image's '" + frame_id +
-                       "'; expected normals in the image's camera frame");
-    }
+    requireImageFrame(normals_msg->header, frame_id, topic, "normals");
     if (static_cast<int>(normals_msg->width) == W &&
         static_cast<int>(normals_msg->height) == H) {
       normalsFromMessage(*normals_msg, topic, settings_.unit_tolerance,
@@ -281,6 +327,8 @@ void FusionPipeline::process(const InputSet& set,
             : nullptr;
     if (confidence_msg) {
       const std::string& ctopic = topics_.confidence[i];
+      requireImageFrame(confidence_msg->header, frame_id, ctopic,
+                        "the confidence");
       if (static_cast<int>(confidence_msg->width) == W &&
           static_cast<int>(confidence_msg->height) == H) {
         confidenceFromMessage(*confidence_msg, ctopic, input.confidence);
@@ -304,7 +352,7 @@ void FusionPipeline::process(const InputSet& set,
   bool warm = false, rotated = false;
   if (has_previous_ && stamp < previous_stamp_) {
     std::ostringstream text;
-    text << "time went backwards by " << (previous_stamp_ - stamp).toSec()
+    text << "time went backwards by " << secondsBetween(previous_stamp_, stamp)
          << " s (a bag loop or a restarted player): warm start reset";
     output->warning = text.str();
     resetWarmStart();
@@ -355,8 +403,9 @@ void FusionPipeline::process(const InputSet& set,
       }
     }
     if (!rotated) {
-      output->warning = "rotation of '" + frame_id + "' relative to '" +
-                        settings_.fixed_frame + "' unknown (" + why + "): ";
+      output->warning = "rotation of '" + frame_id +
+                        "' relative to fixed_frame '" + settings_.fixed_frame +
+                        "' unknown (" + why + "): ";
       if (settings_.warm_start) output->warning += "cold start";
       if (settings_.warm_start && averaging) output->warning += ", ";
       if (averaging) output->warning += "input averages restarted";
@@ -391,8 +440,13 @@ void FusionPipeline::process(const InputSet& set,
   }
 
   try {
-    // time_budget_ms covers the whole frame: conversion, warp and solve.
-    solver_.setBudgetStart(started);
+    // time_budget_ms covers the whole frame: conversion, warp, solve and the
+    // outputs' encoding, whose time (as the last frames took) is set aside
+    // by starting the budget that much earlier.
+    const auto reserve =
+        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+            std::chrono::duration<double>(encode_estimate_s_));
+    solver_.setBudgetStart(started - reserve);
     solver_.solve(problem_, state_, warm || stream_start, report_);
     // The warp's buffers, sized with the state (allocates on the first frame
     // of a size only).
@@ -421,12 +475,24 @@ void FusionPipeline::process(const InputSet& set,
     }
     output->note = text.str();
   }
+  const std::size_t bad_pixels = nonUnitPixels(state_.normals);
+  if (bad_pixels > 0) {
+    // Never published: fused_normals promises a unit normal at every pixel.
+    resetWarmStart();
+    std::ostringstream text;
+    text << topics_.image << ": the solve gave " << bad_pixels << " of "
+         << state_.normals.pixelCount()
+         << " pixels without a finite unit normal (K, the inputs or the "
+            "settings are degenerate); frame skipped, stream reset";
+    throw Error(text.str());
+  }
   has_previous_ = true;
   previous_stamp_ = stamp;
   previous_K_ = problem_.K;
   ++frames_processed_;
 
   // Outputs with the image's header.
+  const auto encode_start = std::chrono::steady_clock::now();
   output->fused = boost::make_shared<sensor_msgs::Image>();
   normalsToMessage(state_.normals, image_msg.header, *output->fused);
   output->fused_vis.reset();
@@ -460,10 +526,15 @@ void FusionPipeline::process(const InputSet& set,
   stats->valid_pixels = report_.valid_pixels;
   stats->filled_pixels = report_.filled_pixels;
   stats->frames_processed = frames_processed_;
-  stats->latency =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - started)
-          .count();
-  previous_seconds_ = stats->latency;
+  stats->encode_time = secondsSince(encode_start);
+  // A slow running estimate: one frame's hiccup does not halve the next
+  // frame's solve.
+  encode_estimate_s_ = frames_processed_ == 1 ? stats->encode_time
+                                              : 0.8 * encode_estimate_s_ +
+                                                    0.2 * stats->encode_time;
+  stats->frame_time = secondsSince(started);
+  stats->latency = stats->frame_time;
+  previous_seconds_ = stats->frame_time;
   output->stats = stats;
 }
 

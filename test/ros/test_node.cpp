@@ -19,9 +19,13 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <random>
+#include <set>
+#include <sstream>
 #include <thread>
 
 #include "normal_fusion/metrics.h"
+#include "normal_fusion/ros/conversions.h"
 #include "ros_test_util.h"
 
 namespace nf = normal_fusion;
@@ -346,42 +350,111 @@ TEST(Node, PublishesDiagnostics) {
   }
 }
 
-TEST(Node, BadInputIsSkippedAndTheNextGoodFrameAnswered) {
-  if (compareMode()) GTEST_SKIP();
-  NodeClient client("");
-  LogCollector logs;
-  client.listen(false, false, true);
-  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
-  const nf::test::NoisyFrame& f = sceneFrame();
+/// One class of bad input: which rule of the node's input checks (see
+/// normal_fusion::node::inputRuleNames; "" for the checks of the set as a
+/// whole), how a good frame is spoiled, and what the error must say.
+struct BadInputCase {
+  const char* what;
+  const char* rule;
+  std::function<void(NodeClient::FrameMessages&)> spoil;
+  std::vector<std::string> logged;
+};
+
+std::vector<BadInputCase> badInputCases() {
   using Messages = NodeClient::FrameMessages;
-  struct Case {
-    const char* what;
-    std::function<void(Messages&)> spoil;
-    std::vector<std::string> logged;
-  };
+  const nf::test::NoisyFrame& f = sceneFrame();
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  const std::vector<Case> cases = {
+  const double inf = std::numeric_limits<double>::infinity();
+  return {
       {"unsupported encoding",
+       "encoding",
        [](Messages& m) { m.image->encoding = "yuv422"; },
        {"/image", "unsupported encoding 'yuv422'"}},
+      {"unknown normals encoding",
+       "encoding",
+       [](Messages& m) { m.normals[1]->encoding = "64FC3"; },
+       {"/normals_1", "unsupported encoding '64FC3'"}},
+      {"empty image",
+       "minimum size",
+       [](Messages& m) {
+         m.image->width = 0;
+         m.image->data.clear();
+       },
+       {"/image", "non-empty"}},
+      {"1x1 image",
+       "",
+       [](Messages& m) {
+         m.image->width = m.image->height = 1;
+         m.image->step = 3;
+         m.image->data.assign(3, 0);
+       },
+       {"/image", "at least 2x2"}},
+      {"1xN image",
+       "",
+       [](Messages& m) {
+         m.image->width = 1;
+         m.image->step = 3;
+         m.image->data.assign(3 * m.image->height, 0);
+       },
+       {"/image", "at least 2x2"}},
+      {"8000x6000 image",
+       "maximum size",
+       [](Messages& m) {
+         // Only the header: the check comes before any buffer is read.
+         m.image->width = 8000;
+         m.image->height = 6000;
+         m.image->step = 3 * 8000;
+         m.image->data.clear();
+       },
+       {"/image", "8000x6000", "max_pixels"}},
+      {"step shorter than a row",
+       "step",
+       [](Messages& m) { m.normals[0]->step = 4; },
+       {"/normals_0", "step 4 is shorter"}},
+      {"step and size inconsistent",
+       "data size",
+       [](Messages& m) { m.normals[0]->data.resize(100); },
+       {"/normals_0", "height * step"}},
+      {"big-endian floats",
+       "endianness",
+       [](Messages& m) { m.normals[0]->is_bigendian = 1; },
+       {"/normals_0", "big-endian"}},
+      {"zero stamp",
+       "stamp zero",
+       [](Messages& m) { m.image->header.stamp = ros::Time(); },
+       {"/image", "stamp is zero"}},
+      {"stamp not normalized",
+       "stamp normalized",
+       [](Messages& m) {
+         m.image->header.stamp.nsec = 1500000000u;
+         m.info->header.stamp.nsec = 1500000000u;
+       },
+       {"/image", "not normalized"}},
       {"size mismatch",
+       "",
        [&](Messages& m) {
-         const nf::NormalMap wide(kWidth, kHeight / 2, 3, 0.0f);
-         nf::NormalMap w = wide;
+         nf::NormalMap w(kWidth, kHeight / 2, 3, 0.0f);
          for (std::size_t i = 0; i < w.pixelCount(); ++i) w.plane(2)[i] = -1;
          m.normals[1] = normalsMessage(w, m.image->header);
        },
        {"/normals_1", "aspect ratio"}},
-      {"step and size inconsistent",
-       [](Messages& m) { m.normals[0]->data.resize(100); },
-       {"/normals_0", "height * step"}},
       {"all-NaN map",
+       "",
        [&](Messages& m) {
          m.normals[0] = normalsMessage(nf::NormalMap(kWidth, kHeight, 3, nan),
                                        m.image->header);
        },
        {"/normals_0", "no valid normal"}},
+      {"infinite normals",
+       "",
+       [&](Messages& m) {
+         nf::NormalMap bad = f.noisy;
+         bad.plane(0)[5] = std::numeric_limits<float>::infinity();
+         m.normals[0] = normalsMessage(bad, m.image->header);
+       },
+       {"/normals_0", "infinite"}},
       {"non-unit vectors",
+       "",
        [&](Messages& m) {
          nf::NormalMap big = f.from_depth;
          for (int c = 0; c < 3; ++c) {
@@ -392,22 +465,68 @@ TEST(Node, BadInputIsSkippedAndTheNextGoodFrameAnswered) {
          m.normals[1] = normalsMessage(big, m.image->header);
        },
        {"/normals_1", "not unit vectors"}},
+      {"normals in another frame",
+       "",
+       [](Messages& m) { m.normals[0]->header.frame_id = "elsewhere"; },
+       {"/normals_0", "frame_id 'elsewhere'"}},
+      {"camera_info in another frame",
+       "",
+       [](Messages& m) { m.info->header.frame_id = "elsewhere"; },
+       {"/camera_info", "frame_id 'elsewhere'"}},
       {"zero K",
+       "K shape",
        [](Messages& m) { m.info->K.fill(0.0); },
        {"/camera_info", "expected K"}},
+      {"negative focal length",
+       "K shape",
+       [](Messages& m) { m.info->K[0] = -500.0; },
+       {"/camera_info", "fx, fy > 0"}},
       {"non-finite K",
-       [](Messages& m) {
-         m.info->K[2] = std::numeric_limits<double>::infinity();
-       },
+       "K finite",
+       [inf](Messages& m) { m.info->K[2] = inf; },
        {"/camera_info", "not finite"}},
+      {"camera_info of another size",
+       "camera_info size",
+       [](Messages& m) { m.info->width = 320; },
+       {"/camera_info", "camera_info is for a 320x"}},
+      {"focal length 1e-150",
+       "K rays",
+       [](Messages& m) { m.info->K[0] = m.info->K[4] = 1e-150; },
+       {"/camera_info", "ray of pixel"}},
+      {"principal point 1e30",
+       "K rays",
+       [](Messages& m) { m.info->K[2] = 1e30; },
+       {"/camera_info", "ray of pixel"}},
+      {"det(K) = inf",
+       "K rays",
+       [](Messages& m) { m.info->K[0] = m.info->K[4] = 1e200; },
+       {"/camera_info", "K is singular"}},
       {"missing camera_info",
+       "",
        [](Messages& m) { m.info.reset(); },
        {"/camera_info", "no camera_info for the image"}},
-      {"zero stamp",
-       [](Messages& m) { m.image->header.stamp = ros::Time(); },
-       {"/image", "stamp is zero"}},
   };
-  for (const Case& c : cases) {
+}
+
+TEST(Node, EveryInputRuleHasABadInputCase) {
+  if (compareMode()) GTEST_SKIP();
+  std::set<std::string> covered;
+  for (const BadInputCase& c : badInputCases()) covered.insert(c.rule);
+  for (const std::string& rule : nf::node::inputRuleNames()) {
+    EXPECT_EQ(covered.count(rule), 1u) << "no bad-input case for " << rule;
+  }
+}
+
+TEST(Node, BadInputIsSkippedAndTheNextGoodFrameAnswered) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  LogCollector logs;
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const nf::test::NoisyFrame& f = sceneFrame();
+  using Messages = NodeClient::FrameMessages;
+  const std::vector<BadInputCase> cases = badInputCases();
+  for (const BadInputCase& c : cases) {
     Messages bad = client.messagesFor(f, newStamp());
     const ros::Time bad_stamp = bad.image->header.stamp;
     c.spoil(bad);
@@ -427,21 +546,142 @@ TEST(Node, BadInputIsSkippedAndTheNextGoodFrameAnswered) {
         << c.what << ": no error naming " << c.logged[0] << " and '"
         << c.logged[1] << "'";
   }
-  // Out of order: an image older than the last one on its topic.
-  Messages old = client.messagesFor(f, next_stamp - 0.5);
-  old.info.reset();
-  old.normals[0].reset();
-  old.normals[1].reset();
-  client.publish(old);
-  EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp(1.0))));
+  // A duplicate: the image of the last frame again.
+  Messages again = client.messagesFor(f, next_stamp);
+  again.info.reset();
+  again.normals[0].reset();
+  again.normals[1].reset();
+  client.publish(again);
   EXPECT_TRUE(waitFor(
       [&] {
-        return logs.seen(rosgraph_msgs::Log::ERROR, {"/image", "out of order"});
+        return logs.seen(rosgraph_msgs::Log::ERROR, {"/image", "duplicate"});
       },
       2.0));
+  EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp(1.0))));
   const auto last = client.stats(ros::Time(next_stamp));
   ASSERT_TRUE(last);
   EXPECT_GE(last->frames_skipped, cases.size());
+}
+
+/// Stamps are fused wherever they lie in ros::Time's range: one in the year
+/// 2100 (beyond a 32-bit Duration from the others), then time going back.
+TEST(Node, FarStampsAndTimeGoingBackAreFused) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  LogCollector logs;
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const nf::test::NoisyFrame& f = sceneFrame();
+  ASSERT_TRUE(answered(client, client.messagesFor(f, newStamp())));
+  const double year_2100 = 4102444800.0;
+  EXPECT_TRUE(answered(client, client.messagesFor(f, year_2100)));
+  EXPECT_TRUE(answered(client, client.messagesFor(f, year_2100 + 0.1)));
+  // Back to the present: the synchronizer and the stream restart.
+  EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp())));
+  EXPECT_TRUE(waitFor(
+      [&] {
+        return logs.seen(rosgraph_msgs::Log::INFO,
+                         {"time went back", "synchronizer and stream reset"});
+      },
+      2.0));
+  EXPECT_FALSE(logs.seen(rosgraph_msgs::Log::ERROR, {"32-bit"}));
+  const auto stats = client.stats(ros::Time(next_stamp));
+  ASSERT_TRUE(stats);
+  EXPECT_FALSE(stats->warm_started);
+  EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp())));
+  EXPECT_TRUE(client.stats(ros::Time(next_stamp))->warm_started);
+}
+
+/// A seeded fuzz: a few hundred messages spoiled at random (encodings,
+/// sizes, steps, bytes, stamps, K) on every input topic, with a good frame
+/// after every tenth; the node answers each good frame and the last one.
+TEST(Node, SurvivesSeededFuzz) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const nf::test::NoisyFrame& f = sceneFrame();
+  std::mt19937 rng(20261201);
+  auto pick = [&](int n) {
+    return static_cast<int>(std::uniform_int_distribution<int>(0, n - 1)(rng));
+  };
+  const char* const encodings[] = {"rgb8",  "bgr8",  "mono8", "mono16",
+                                   "32FC3", "32FC1", "16UC1", "yuv422",
+                                   "",      "8UC3",  "rgba8", "64FC1"};
+  const double specials[] = {0.0,
+                             -1.0,
+                             1e-150,
+                             1e300,
+                             std::numeric_limits<double>::infinity(),
+                             std::numeric_limits<double>::quiet_NaN(),
+                             -0.0,
+                             1e30};
+  auto spoilImage = [&](sensor_msgs::Image& m) {
+    switch (pick(7)) {
+      case 0:
+        m.encoding = encodings[pick(12)];
+        break;
+      case 1:
+        m.width = static_cast<std::uint32_t>(pick(3) == 0 ? rng() : pick(200));
+        break;
+      case 2:
+        m.height = static_cast<std::uint32_t>(pick(3) == 0 ? rng() : pick(200));
+        break;
+      case 3:
+        m.step = static_cast<std::uint32_t>(pick(2) == 0 ? rng() : pick(2000));
+        break;
+      case 4:
+        m.data.resize(pick(2) == 0 ? pick(1000) : m.data.size() + pick(64));
+        break;
+      case 5:  // random bytes: NaN, inf, huge and non-unit floats
+        for (int k = 0; k < 64 && !m.data.empty(); ++k) {
+          m.data[pick(static_cast<int>(m.data.size()))] =
+              static_cast<std::uint8_t>(rng());
+        }
+        break;
+      default:
+        m.is_bigendian = static_cast<std::uint8_t>(pick(3));
+    }
+  };
+  int good = 0;
+  for (int k = 0; k < 300; ++k) {
+    NodeClient::FrameMessages m = client.messagesFor(f, newStamp(0.05));
+    const int mutations = 1 + pick(3);
+    for (int j = 0; j < mutations; ++j) {
+      switch (pick(6)) {
+        case 0:
+          spoilImage(*m.image);
+          break;
+        case 1:
+          spoilImage(*m.normals[0]);
+          break;
+        case 2:
+          spoilImage(*m.normals[1]);
+          break;
+        case 3:
+          m.info->K[pick(9)] = specials[pick(8)];
+          break;
+        case 4: {
+          std_msgs::Header& h =
+              pick(2) == 0 ? m.image->header : m.normals[pick(2)]->header;
+          h.stamp.nsec = static_cast<std::uint32_t>(rng());
+          if (pick(4) == 0) h.stamp.sec = static_cast<std::uint32_t>(rng());
+          break;
+        }
+        default:
+          m.info->width = static_cast<std::uint32_t>(pick(200));
+      }
+    }
+    client.publish(m);
+    if (k % 10 == 9) {
+      ros::WallDuration(0.05).sleep();
+      ++good;
+      EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp(1.0))))
+          << "good frame " << good << " (after fuzz message " << k
+          << ") unanswered";
+    }
+  }
+  EXPECT_TRUE(answered(client, client.messagesFor(f, newStamp(1.0))));
 }
 
 TEST(Node, WarnsNamingTheMissingInputs) {
@@ -494,14 +734,17 @@ TEST(Node, DynamicReconfigureTakesEffectOnTheNextFrame) {
   srv.request.config.bools.push_back(b);
   dynamic_reconfigure::DoubleParameter d;
   d.name = "edge_w_min";
-  d.value = 5.0;  // invalid: corrected to 1 with a warning naming it
+  d.value = 5.0;  // invalid: refused with a warning naming it
   srv.request.config.doubles.push_back(d);
   ASSERT_TRUE(ros::service::call(service, srv));
-  bool corrected = false;
-  for (const auto& q : srv.response.config.doubles) {
-    if (q.name == "edge_w_min") corrected = q.value == 1.0;
+  double w_min_before = -1.0, w_min_after = -2.0;
+  for (const auto& q : current.response.config.doubles) {
+    if (q.name == "edge_w_min") w_min_before = q.value;
   }
-  EXPECT_TRUE(corrected);
+  for (const auto& q : srv.response.config.doubles) {
+    if (q.name == "edge_w_min") w_min_after = q.value;
+  }
+  EXPECT_EQ(w_min_after, w_min_before) << "edge_w_min = 5 was not refused";
   EXPECT_TRUE(waitFor(
       [&] { return logs.seen(rosgraph_msgs::Log::WARN, {"'edge_w_min' = 5"}); },
       2.0));
@@ -522,6 +765,118 @@ TEST(Node, DynamicReconfigureTakesEffectOnTheNextFrame) {
 
 /// The warm start and the inputs' temporal averages (temporal_frames, set
 /// through dynamic_reconfigure) carried by the camera's rotation from tf.
+/// The configuration as a map name -> value text, for comparisons.
+std::map<std::string, std::string> configValues(
+    const dynamic_reconfigure::Config& config) {
+  std::map<std::string, std::string> values;
+  for (const auto& p : config.bools) values[p.name] = p.value ? "1" : "0";
+  for (const auto& p : config.ints) values[p.name] = std::to_string(p.value);
+  for (const auto& p : config.doubles) {
+    std::ostringstream text;
+    text << p.value;
+    values[p.name] = text.str();
+  }
+  for (const auto& p : config.strs) values[p.name] = "'" + p.value + "'";
+  return values;
+}
+
+/// One invalid value through dynamic_reconfigure is refused alone: every
+/// other setting keeps its value (a live stream keeps its budget); accepted
+/// extreme values still give output.
+TEST(Node, AnInvalidReconfigureValueLeavesEveryOtherSetting) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  LogCollector logs;
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const std::string service = nodeName() + "/set_parameters";
+  ASSERT_TRUE(ros::service::waitForService(service, 5000));
+  dynamic_reconfigure::Reconfigure original;
+  ASSERT_TRUE(ros::service::call(service, original));
+  auto set = [&](const std::string& name, double value) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::DoubleParameter d;
+    d.name = name;
+    d.value = value;
+    srv.request.config.doubles.push_back(d);
+    EXPECT_TRUE(ros::service::call(service, srv)) << name;
+    return srv.response.config;
+  };
+  // A live stream's budget first.
+  const auto live = configValues(set("time_budget_ms", 33.0));
+  ASSERT_EQ(live.at("time_budget_ms"), "33");
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const auto& [name, value] : std::vector<std::pair<std::string, double>>{
+           {"huber_eps", inf},
+           {"edge_smoothing_sigma", inf},
+           {"edge_smoothing_sigma", 1e4},
+           {"weight_0", inf},
+           {"time_budget_ms", -1.0},
+           {"time_budget_ms", nan}}) {
+    const auto after = configValues(set(name, value));
+    EXPECT_EQ(after, live) << name << " = " << value
+                           << " changed the configuration";
+    EXPECT_TRUE(waitFor(
+        [&] {
+          return logs.seen(rosgraph_msgs::Log::WARN, {"'" + name + "' = "});
+        },
+        2.0))
+        << "no warning names " << name;
+    const auto m = client.messagesFor(sceneFrame(), newStamp());
+    ASSERT_TRUE(answered(client, m)) << "no output after " << name;
+    EXPECT_GT(client.stats(m.image->header.stamp)->solve_time, 0.0);
+  }
+  // Accepted extremes: the largest pre-smoothing, a huge input weight, a
+  // budget of 1 ms.
+  for (const auto& [name, value] : std::vector<std::pair<std::string, double>>{
+           {"edge_smoothing_sigma", 10.0},
+           {"weight_0", 1e6},
+           {"time_budget_ms", 1.0}}) {
+    auto after = configValues(set(name, value));
+    std::ostringstream text;
+    text << value;
+    EXPECT_EQ(after.at(name), text.str()) << name << " was not accepted";
+    const auto m = client.messagesFor(sceneFrame(), newStamp());
+    ASSERT_TRUE(answered(client, m, 10.0)) << "no output with " << name;
+  }
+  dynamic_reconfigure::Reconfigure restore;
+  restore.request.config = original.response.config;
+  ASSERT_TRUE(ros::service::call(service, restore));
+}
+
+/// fixed_frame naming a frame that tf does not know: the warning names the
+/// parameter, and frames are still answered (cold-started).
+TEST(Node, AnUnknownFixedFrameIsNamedInTheWarning) {
+  if (compareMode()) GTEST_SKIP();
+  NodeClient client("");
+  LogCollector logs;
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  const std::string service = nodeName() + "/set_parameters";
+  ASSERT_TRUE(ros::service::waitForService(service, 5000));
+  dynamic_reconfigure::Reconfigure original;
+  ASSERT_TRUE(ros::service::call(service, original));
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::StrParameter frame;
+  frame.name = "fixed_frame";
+  frame.value = "no_such_frame";
+  srv.request.config.strs.push_back(frame);
+  ASSERT_TRUE(ros::service::call(service, srv));
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_TRUE(answered(client, client.messagesFor(sceneFrame(), newStamp())));
+  }
+  EXPECT_TRUE(waitFor(
+      [&] {
+        return logs.seen(rosgraph_msgs::Log::WARN,
+                         {"fixed_frame 'no_such_frame'"});
+      },
+      2.0));
+  dynamic_reconfigure::Reconfigure restore;
+  restore.request.config = original.response.config;
+  ASSERT_TRUE(ros::service::call(service, restore));
+}
+
 TEST(Node, RotationCompensatedWarmStartAndInputAveragesWithTf) {
   if (compareMode()) GTEST_SKIP();
   NodeClient client("");

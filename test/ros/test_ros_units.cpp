@@ -85,7 +85,7 @@ TEST(Parameters, RoundTripKeepsEveryValue) {
   EXPECT_EQ(back.inputs[2].orientation.M, Orientation::opengl().M);
 }
 
-TEST(Parameters, InvalidValuesAreCorrectedWithAWarningNamingThem) {
+TEST(Parameters, InvalidValuesAreRefusedWithAWarningNamingThem) {
   ParameterMap params;
   params["lambda"] = -1.0;
   params["edge_w_min"] = 2.0;
@@ -102,13 +102,14 @@ TEST(Parameters, InvalidValuesAreCorrectedWithAWarningNamingThem) {
   const NodeSettings defaults;
   EXPECT_EQ(s.solver.lambda, defaults.solver.lambda);  // > 0 required
   EXPECT_EQ(std::get<double>(params["lambda"]), defaults.solver.lambda);
-  EXPECT_EQ(s.solver.edges.w_min, 1.0);
+  // Out of range: refused, not clamped (a bound may mean "off").
+  EXPECT_EQ(s.solver.edges.w_min, defaults.solver.edges.w_min);
   EXPECT_EQ(s.solver.inner_iterations, 3);  // rounded
   EXPECT_EQ(s.solver.max_outer_iterations,
             defaults.solver.max_outer_iterations);
   EXPECT_EQ(s.solver.penalty, defaults.solver.penalty);
   EXPECT_EQ(s.inputs[1].orientation.M, Orientation::optical().M);
-  EXPECT_EQ(s.num_inputs, kMaxInputs);
+  EXPECT_EQ(s.num_inputs, defaults.num_inputs);
   EXPECT_EQ(s.inputs[0].weight, defaults.inputs[0].weight);
   EXPECT_TRUE(s.warm_start);
   for (const char* name :
@@ -123,6 +124,45 @@ TEST(Parameters, InvalidValuesAreCorrectedWithAWarningNamingThem) {
   params.erase("no_such_parameter");
   settingsFromParameters(params, &warnings);
   EXPECT_TRUE(warnings.empty()) << warnings.front();
+}
+
+TEST(Parameters, AnInvalidValueKeepsTheValueInUseAndEveryOtherSetting) {
+  // The settings in use, as a live stream has them.
+  NodeSettings current;
+  current.solver.time_budget_ms = 33.0;
+  current.solver.huber_eps = 0.01;
+  current.solver.edges.smoothing_sigma = 1.0;
+  current.inputs[0].weight = 2.0;
+  current.fixed_frame = "odom";
+  const ParameterMap in_use = parametersFromSettings(current);
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // Each of these, sent alone (as rqt_reconfigure does), is refused.
+  const std::vector<std::pair<std::string, ParameterValue>> bad = {
+      {"huber_eps", inf},
+      {"edge_smoothing_sigma", inf},
+      {"edge_smoothing_sigma", 1e4},
+      {"weight_0", inf},
+      {"time_budget_ms", -1.0},
+      {"time_budget_ms", nan},
+      {"lambda", inf},
+      {"edge_alpha", -inf},
+      {"relative_tolerance", nan},
+      {"max_interval", 1e9},
+      {"inner_iterations", -5},
+      {"temporal_gate_deg", 0.0},
+  };
+  for (const auto& [name, value] : bad) {
+    ParameterMap params = in_use;
+    params[name] = value;
+    std::vector<std::string> warnings;
+    const NodeSettings s = settingsFromParameters(params, &warnings, current);
+    EXPECT_EQ(parametersFromSettings(s), in_use)
+        << name << " = " << toString(value) << " changed the settings";
+    EXPECT_EQ(params, in_use) << name << ": the map was not corrected";
+    ASSERT_EQ(warnings.size(), 1u) << name;
+    EXPECT_TRUE(mentions(warnings, "'" + name + "'")) << warnings.front();
+  }
 }
 
 TEST(Parameters, StepSizesComeInPairsAndMeetTheStepCondition) {
@@ -317,6 +357,67 @@ TEST(Conversions, ColourCodedNormalsDecodeInEveryChannelOrder) {
     EXPECT_NEAR(normals.at(2, 0, 0), -0.8f, 0.01f) << encoding;
     EXPECT_TRUE(std::isnan(normals.at(0, 0, 1))) << "black is missing";
   }
+}
+
+TEST(Conversions, AKThatCannotGiveFiniteRaysIsRefusedNamingTheTopic) {
+  sensor_msgs::CameraInfo info;
+  info.width = 640;
+  info.height = 480;
+  // Each of these passed the checks before and gave NaN normals.
+  const std::vector<std::array<double, 9>> bad = {
+      {1e-150, 0, 320, 0, 1e-150, 240, 0, 0, 1},  // focal length 1e-150
+      {500, 0, 1e30, 0, 500, 240, 0, 0, 1},       // principal point 1e30
+      {1e200, 0, 320, 0, 1e200, 240, 0, 0, 1},    // det(K) = inf
+      {1e-3, 0, 320, 0, 500, 240, 0, 0, 1},       // 89.9999 degrees
+  };
+  for (const auto& K : bad) {
+    std::copy(K.begin(), K.end(), info.K.begin());
+    const std::string error =
+        inputErrorOf([&] { intrinsicsFromCameraInfo(info, "/ci", 640, 480); });
+    EXPECT_EQ(error.rfind("/ci: ", 0), 0u) << error;
+    EXPECT_NE(error.find("camera intrinsics: "), std::string::npos) << error;
+  }
+  // A 170-degree fisheye-like focal length and a principal point outside the
+  // image (a crop) are fine.
+  info.K = {28, 0, 320, 0, 28, 240, 0, 0, 1};
+  EXPECT_NO_THROW(intrinsicsFromCameraInfo(info, "/ci", 640, 480));
+  info.K = {500, 0, -200, 0, 500, 900, 0, 0, 1};
+  EXPECT_NO_THROW(intrinsicsFromCameraInfo(info, "/ci", 640, 480));
+}
+
+TEST(Conversions, ArrivalChecksNameTheTopicAndRefuseBeforeAllocating) {
+  std_msgs::Header header;
+  header.stamp = ros::Time(10, 0);
+  header.stamp.nsec = 1000000000u;  // not normalized
+  EXPECT_NE(inputErrorOf([&] {
+              precheckMessage("/image", header, nullptr);
+            }).find("/image: stamp nsec = 1000000000 is not normalized"),
+            std::string::npos);
+  header.stamp = ros::Time(4102444800u, 0);  // the year 2100 is fine
+  EXPECT_NO_THROW(precheckMessage("/image", header, nullptr));
+  // An 8000x6000 header without data: refused on its size alone.
+  sensor_msgs::Image big;
+  big.encoding = "rgb8";
+  big.width = 8000;
+  big.height = 6000;
+  big.step = 24000;
+  MessageLimits limits;
+  const std::string error =
+      inputErrorOf([&] { precheckMessage("/image", header, &big, limits); });
+  EXPECT_NE(error.find("/image: a 8000x6000 image (48000000 pixels) is larger "
+                       "than max_pixels = 12000000"),
+            std::string::npos)
+      << error;
+  limits.max_pixels = 0;  // no bound: the data size is checked next
+  EXPECT_NE(inputErrorOf([&] {
+              precheckMessage("/image", header, &big, limits);
+            }).find("height * step"),
+            std::string::npos);
+  // Gaps between stamps of any two times, in seconds, without overflow.
+  EXPECT_NEAR(secondsBetween(ros::Time(4102444800u, 0), ros::Time(100, 0)),
+              4102444700.0, 1e-3);
+  EXPECT_NEAR(secondsBetween(ros::Time(100, 0), ros::Time(4102444800u, 0)),
+              -4102444700.0, 1e-3);
 }
 
 TEST(Conversions, CameraInfoIsChecked) {
@@ -616,17 +717,34 @@ TEST(Synchronizer, OptionalTopicsJoinWhenPresent) {
   EXPECT_FALSE(sets[1].present[2]);
 }
 
-TEST(Synchronizer, OutOfOrderIsRejectedAndATimeJumpResets) {
+TEST(Synchronizer, ADuplicateIsRejectedAndAnyStepBackRestarts) {
   Sync sync({true, true}, syncOptions(true, 10));
   EXPECT_EQ(sync.add(0, 5000 * kMs, 1), Sync::AddResult::kQueued);
-  EXPECT_EQ(sync.add(0, 4990 * kMs, 2), Sync::AddResult::kOutOfOrder);
   EXPECT_EQ(sync.add(0, 5000 * kMs, 3), Sync::AddResult::kOutOfOrder);
-  EXPECT_EQ(sync.add(0, 10 * kMs, 4), Sync::AddResult::kTimeReset);
   EXPECT_EQ(sync.queued(0), 1);
-  sync.add(1, 10 * kMs, 14);
+  // A bag of less than a second played again: 0.6 s back restarts too. The
+  // old timeline's messages go.
+  EXPECT_EQ(sync.add(1, 5000 * kMs, 11), Sync::AddResult::kQueued);
+  EXPECT_EQ(sync.add(0, 4400 * kMs, 2), Sync::AddResult::kTimeReset);
+  EXPECT_EQ(sync.queued(0), 1);
+  EXPECT_EQ(sync.queued(1), 0);
+  EXPECT_EQ(sync.add(1, 4400 * kMs, 12), Sync::AddResult::kQueued);
+  ASSERT_EQ(sync.poll().size(), 1u);
+  // The new timeline's messages that other topics queued first stay: here
+  // topic 1 goes back first, then the pivot follows within the spread.
+  EXPECT_EQ(sync.add(0, 4433 * kMs, 6), Sync::AddResult::kQueued);
+  EXPECT_EQ(sync.add(1, 10 * kMs, 14), Sync::AddResult::kTimeReset);
+  EXPECT_EQ(sync.queued(0), 0);
+  EXPECT_EQ(sync.add(0, 10 * kMs, 4), Sync::AddResult::kQueued);
+  EXPECT_EQ(sync.queued(1), 1);
   const auto sets = sync.poll();
   ASSERT_EQ(sets.size(), 1u);
   EXPECT_EQ(sets[0].messages[0], 4);
+  EXPECT_EQ(sets[0].messages[1], 14);
+  // Then the new timeline runs on: the next pivot forms its set.
+  EXPECT_EQ(sync.add(0, 43 * kMs, 5), Sync::AddResult::kQueued);
+  EXPECT_EQ(sync.add(1, 43 * kMs, 15), Sync::AddResult::kQueued);
+  ASSERT_EQ(sync.poll().size(), 1u);
 }
 
 TEST(Synchronizer, QueuesAreBounded) {

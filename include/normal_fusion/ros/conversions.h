@@ -7,7 +7,9 @@
 #include <sensor_msgs/Image.h>
 #include <std_msgs/Header.h>
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/types.h"
@@ -15,10 +17,27 @@
 namespace normal_fusion {
 namespace node {
 
-/// Checks an image message's layout against its buffer: a known encoding,
-/// width, height > 0, step >= width * bytes per pixel, height * step ==
-/// data.size(), little-endian multi-byte data.
-void checkImageLayout(const sensor_msgs::Image& msg, const std::string& topic);
+/// What the arrival checks bound.
+struct MessageLimits {
+  /// Most pixels an image may have (0 = no bound).
+  std::uint64_t max_pixels = kDefaultMaxPixels;
+};
+
+// The input checks are tables of named rules (conversions.cpp), applied in
+// order; the first rule a message breaks throws InputError naming the topic.
+
+/// Checks an image message's layout against its buffer: a known encoding, a
+/// non-empty size of at most limits.max_pixels pixels, step >= width * bytes
+/// per pixel, height * step == data.size(), little-endian multi-byte data.
+void checkImageLayout(const sensor_msgs::Image& msg, const std::string& topic,
+                      const MessageLimits& limits);
+
+/// Checks a header: a non-zero, normalized stamp (nsec < 1e9).
+void checkHeader(const std_msgs::Header& header, const std::string& topic);
+
+/// The names of every input rule (header, image layout, camera_info), for the
+/// tests that must cover each.
+std::vector<std::string> inputRuleNames();
 
 /// The guide image: rgb8, bgr8, rgba8, bgra8, rgb16, bgr16, rgba16, bgra16 ->
 /// 3 planes R, G, B; mono8, 8UC1, mono16, 16UC1 -> 1 plane; values in [0, 1].
@@ -39,9 +58,10 @@ void normalsFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
 void confidenceFromMessage(const sensor_msgs::Image& msg,
                            const std::string& topic, ScalarMap& confidence);
 
-/// K of a camera_info, checked: finite, fx, fy > 0, K[2][2] = 1, and the
+/// K of a camera_info, checked: finite, fx, fy > 0, last row (0, 0, 1), the
 /// camera_info's size equal to the image's (a size of 0 x 0 is accepted as
-/// "not given").
+/// "not given"), and finite viewing rays at every pixel of the image
+/// (CameraIntrinsics::validateForImage).
 CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
                                           const std::string& topic,
                                           int image_width, int image_height);
@@ -56,8 +76,8 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
 /// across calls).
 void resampleMap(const PlanarImage& source, int width, int height,
                  Resampling method, bool is_normal_map,
-                 const std::string& topic, PlanarImage& target,
-                 int threads = 1, PlanarImage* scratch = nullptr);
+                 const std::string& topic, PlanarImage& target, int threads = 1,
+                 PlanarImage* scratch = nullptr);
 
 /// The fused map as sensor_msgs/Image 32FC3 (x, y, z per pixel).
 void normalsToMessage(const NormalMap& normals, const std_msgs::Header& header,

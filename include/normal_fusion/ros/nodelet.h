@@ -5,6 +5,7 @@
 #pragma once
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <diagnostic_updater/update_functions.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
@@ -50,6 +51,8 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   // Every input callback ends here: checks, queues, forms sets.
   void onMessage(int topic, const std_msgs::Header& header,
                  const QueuedMessage& message);
+  void handleMessage(int topic, const std_msgs::Header& header,
+                     const QueuedMessage& message);
   void configCb(Config& config, uint32_t level);
   void workerLoop();
   void publishOutputs(const PipelineOutput& output);
@@ -65,8 +68,9 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   ParameterMap static_params_;
   NodeSettings settings_;  ///< guarded by settings_mutex_
   std::vector<TopicRole> roles_;
-  int num_inputs_ = 1;  ///< fixed at start
-  int queue_size_ = 5;  ///< fixed at start
+  int num_inputs_ = 1;    ///< fixed at start
+  int queue_size_ = 5;    ///< fixed at start
+  MessageLimits limits_;  ///< fixed at start
 
   // Publishers and lazy subscriptions.
   std::mutex connect_mutex_;
@@ -91,6 +95,8 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   std::optional<InputSet> pending_;
   ros::WallTime pending_formed_;
   bool stop_ = false;
+  /// Time went back: the worker drops the warm start before the next set.
+  bool stream_reset_ = false;
   std::thread worker_;
   std::unique_ptr<FusionPipeline> pipeline_;  ///< used by the worker only
 
@@ -113,8 +119,14 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   std::map<std::string, ros::WallTime> last_logged_;
   ros::WallTime last_error_time_;
   std::deque<std::pair<ros::WallTime, double>> recent_outputs_;  ///< latency
+  std::deque<ros::WallTime> recent_errors_;
+  ros::WallTime last_output_time_;
   double last_solve_time_ = 0.0;
   std::unique_ptr<diagnostic_updater::Updater> updater_;
+  /// Expected output rate bounds (Hz), fixed at start.
+  double rate_min_ = 0.0, rate_max_ = 0.0;
+  std::unique_ptr<diagnostic_updater::FrequencyStatus> output_rate_;
+  std::string camera_frame_;  ///< the images' frame_id, the hardware_id
   ros::WallTimer timer_;
 };
 

@@ -21,6 +21,9 @@ namespace node {
 
 /// Most normal-map inputs a node takes (topics normals_0 .. normals_7).
 constexpr int kMaxInputs = 8;
+/// Default bound on an input image's pixels: 12 megapixels, above 4K UHD
+/// (3840x2160) and 4000x3000 sensors.
+constexpr int kDefaultMaxPixels = 12000000;
 
 /// One parameter value as the parameter server types it.
 using ParameterValue = std::variant<bool, int, double, std::string>;
@@ -56,6 +59,14 @@ struct NodeSettings {
   double max_interval = 0.05;    ///< largest stamp spread of a set, seconds
   double missing_input_timeout = 5.0;  ///< warn when no set formed for so long
 
+  /// Larger images are refused on arrival, before any buffer is sized.
+  int max_pixels = kDefaultMaxPixels;
+
+  // Diagnostics: the fused_normals rate expected (Hz); outside it the
+  // frequency status warns.
+  double expected_rate_min = 0.5;
+  double expected_rate_max = 100.0;
+
   // Inputs.
   Resampling resampling = Resampling::kBilinear;
   /// Valid float normals must have |n| within 1 +- unit_tolerance (they are
@@ -77,20 +88,25 @@ struct NodeSettings {
 
 /// True for parameters that dynamic_reconfigure may change at run time; the
 /// others (num_inputs, approximate_sync, queue_size, use_confidence_i,
-/// optional_i) shape the subscriptions and are read at start only.
+/// optional_i, max_pixels, expected_rate_min / max) shape the subscriptions,
+/// the arrival checks or the diagnostics and are read at start only.
 bool isDynamicParameter(const std::string& name);
 
 /// Every parameter with the value `settings` gives it.
 ParameterMap parametersFromSettings(const NodeSettings& settings);
 
-/// The one place where parameters become settings. Missing entries are added
-/// with their defaults; values of the wrong type, out of range or unparsable
-/// are corrected in `params` (clamped to the range, or the default) and each
-/// correction appends a warning that names the parameter, the value given and
-/// the value used. Unknown names are reported likewise and left alone. Never
-/// throws.
+/// The one place where parameters become settings. Starts from `base` (the
+/// library's defaults at start, the settings in use when reconfiguring):
+/// missing entries are added with its values; values of the wrong type,
+/// non-finite, out of range or unparsable are refused and keep `base`'s
+/// value, in `params` too, and each refusal appends a warning that names the
+/// parameter, the value given and the value used (a non-integer for an
+/// integer is rounded instead). A combination the library rejects refuses
+/// the one parameter whose base value makes it valid. Unknown names are
+/// reported likewise and left alone. Never throws.
 NodeSettings settingsFromParameters(ParameterMap& params,
-                                    std::vector<std::string>* warnings);
+                                    std::vector<std::string>* warnings,
+                                    const NodeSettings& base = NodeSettings());
 
 /// Reads a flat YAML map of parameters (as `rosparam load` takes it) with the
 /// types YAML gives the scalars. Throws InputError for an unreadable file or a

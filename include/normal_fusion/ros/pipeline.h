@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/solver.h"
 
@@ -67,11 +68,15 @@ std::vector<bool> requiredTopics(const std::vector<TopicRole>& roles,
 /// inputs without one get the default name).
 TopicNames topicNamesOf(const std::vector<TopicRole>& roles, int num_inputs);
 
-/// The checks a message gets on arrival, before it may join a set: a non-zero
-/// stamp and, for images, a layout that matches the buffer. Throws InputError
-/// naming the topic.
+/// The checks a message gets on arrival, before it may join a set: a non-zero,
+/// normalized stamp and, for images, a layout that matches the buffer and a
+/// size within the limits. Throws InputError naming the topic.
 void precheckMessage(const std::string& topic, const std_msgs::Header& header,
-                     const sensor_msgs::Image* image);
+                     const sensor_msgs::Image* image,
+                     const MessageLimits& limits = MessageLimits());
+
+/// later - earlier in seconds, for any two valid stamps (no overflow).
+double secondsBetween(const ros::Time& later, const ros::Time& earlier);
 
 /// Builds the pipeline's input set from a synchronized set.
 InputSet inputSetFrom(const std::vector<TopicRole>& roles,
@@ -155,6 +160,8 @@ class FusionPipeline {
   double previous_seconds_ = 0.0;
   CameraIntrinsics previous_K_;
   std::uint64_t frames_processed_ = 0;
+  /// Seconds the outputs' encoding takes, reserved inside the frame budget.
+  double encode_estimate_s_ = 0.0;
 };
 
 }  // namespace node

@@ -22,9 +22,9 @@
 //
 // Each message joins at most one set. Pivots that cannot get a set are
 // discarded (counted); each queue keeps at most queue_size messages, dropping
-// the oldest (counted). A stamp older than the newest of its topic is
-// rejected as out of order; one more than 1 s older resets every queue (a bag
-// loop or a restarted player).
+// the oldest (counted). A stamp equal to the newest of its topic is rejected
+// as a duplicate; an older one means that time went back (a bag loop or a
+// restarted player): every queue drops what is later than it (restartAt).
 #pragma once
 
 #include <algorithm>
@@ -64,11 +64,9 @@ class StampSynchronizer {
 
   enum class AddResult {
     kQueued,      ///< queued (sets may be ready: call poll())
-    kOutOfOrder,  ///< stamp not newer than the topic's newest: dropped
-    kTimeReset,   ///< time jumped back by more than 1 s: queues reset, queued
+    kOutOfOrder,  ///< stamp equal to the topic's newest: dropped
+    kTimeReset,   ///< stamp older than the topic's newest: queues reset, queued
   };
-
-  static constexpr std::int64_t kTimeResetNs = 1000000000;
 
   StampSynchronizer(std::vector<bool> required, const Options& options)
       : required_(std::move(required)),
@@ -92,10 +90,10 @@ class StampSynchronizer {
   AddResult add(int topic, std::int64_t stamp_ns, const Message& message) {
     AddResult result = AddResult::kQueued;
     if (newest_[topic] != kNone && stamp_ns <= newest_[topic]) {
-      if (newest_[topic] - stamp_ns <= kTimeResetNs) {
-        return AddResult::kOutOfOrder;
-      }
-      reset();
+      if (stamp_ns == newest_[topic]) return AddResult::kOutOfOrder;
+      restartAt(stamp_ns);
+      auto& own = queues_[topic];
+      while (!own.empty() && own.back().stamp >= stamp_ns) own.pop_back();
       result = AddResult::kTimeReset;
     }
     newest_[topic] = stamp_ns;
@@ -117,6 +115,21 @@ class StampSynchronizer {
   void reset() {
     for (auto& queue : queues_) queue.clear();
     std::fill(newest_.begin(), newest_.end(), kNone);
+  }
+
+  /// Time went back to `stamp_ns`: the messages of the old timeline (later
+  /// than it by more than max_interval) go; those of the new one that other
+  /// topics queued already stay.
+  void restartAt(std::int64_t stamp_ns) {
+    const std::int64_t keep_until = stamp_ns + options_.max_interval_ns;
+    for (std::size_t t = 0; t < queues_.size(); ++t) {
+      auto& queue = queues_[t];
+      while (!queue.empty() && queue.back().stamp > keep_until) {
+        queue.pop_back();
+      }
+      // Each queue is sorted by stamp, so what is left ends at its newest.
+      newest_[t] = queue.empty() ? kNone : queue.back().stamp;
+    }
   }
 
   /// The pivots discarded since the last call (decided failures only, not
