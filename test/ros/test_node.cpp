@@ -318,36 +318,110 @@ TEST(Node, RunsWithTheLaunchFilesWaitPolicy) {
   EXPECT_EQ(policy, "passive") << process_node << " (pid " << pid << ")";
 }
 
+/// The node's statuses on /diagnostics, newest first per name.
+class DiagnosticsCollector {
+ public:
+  DiagnosticsCollector() {
+    ros::NodeHandle nh;
+    sub_ = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", 10,
+        [this](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto& status : m->status) {
+            if (status.name.find("normal_fusion") == std::string::npos) {
+              continue;
+            }
+            latest_[status.name.find("output rate") != std::string::npos
+                        ? "rate"
+                        : "main"] = status;
+          }
+        });
+  }
+  /// The latest status of "main" (the node's) or "rate" (the output rate).
+  bool latest(const std::string& which, diagnostic_msgs::DiagnosticStatus* s) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = latest_.find(which);
+    if (it == latest_.end()) return false;
+    *s = it->second;
+    return true;
+  }
+  void clear() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    latest_.clear();
+  }
+
+ private:
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::map<std::string, diagnostic_msgs::DiagnosticStatus> latest_;
+};
+
+std::string valueOf(const diagnostic_msgs::DiagnosticStatus& s,
+                    const std::string& key) {
+  for (const auto& kv : s.values) {
+    if (kv.key == key) return kv.value;
+  }
+  return "(none)";
+}
+
 TEST(Node, PublishesDiagnostics) {
   if (compareMode()) GTEST_SKIP();
-  std::mutex mutex;
-  std::map<std::string, std::string> values;
-  std::string name;
-  ros::NodeHandle nh;
-  ros::Subscriber sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
-      "/diagnostics", 10,
-      [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mutex);
-        for (const auto& status : m->status) {
-          if (status.name.find("normal_fusion") == std::string::npos) continue;
-          name = status.name;
-          for (const auto& kv : status.values) values[kv.key] = kv.value;
-        }
-      });
-  ASSERT_TRUE(waitFor(
-      [&] {
-        std::lock_guard<std::mutex> lock(mutex);
-        return values.count("frames processed") > 0;
-      },
-      5.0));
-  std::lock_guard<std::mutex> lock(mutex);
-  EXPECT_GT(std::stoi(values["frames processed"]), 0) << name;
+  NodeClient client("");
+  DiagnosticsCollector diagnostics;
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
+  // Frames at 10 Hz for 1.5 s: fusing, the camera's frame as hardware_id, an
+  // output rate within the expected bounds.
+  diagnostic_msgs::DiagnosticStatus status, rate;
+  for (int k = 0; k < 40; ++k) {
+    client.publish(client.messagesFor(sceneFrame(), newStamp()));
+    ros::WallDuration(0.1).sleep();
+    if (k == 15) diagnostics.clear();
+    if (k > 15 && diagnostics.latest("main", &status) &&
+        diagnostics.latest("rate", &rate)) {
+      break;
+    }
+  }
+  ASSERT_TRUE(diagnostics.latest("main", &status) &&
+              diagnostics.latest("rate", &rate));
+  EXPECT_EQ(status.level, diagnostic_msgs::DiagnosticStatus::OK)
+      << status.message;
+  EXPECT_EQ(status.hardware_id, "camera");
+  EXPECT_GT(std::stoi(valueOf(status, "frames processed")), 0);
   for (const char* key :
        {"output rate (Hz, last 5 s)", "mean latency (s, last 5 s)",
         "frames dropped (worker busy)", "frames skipped (bad input)",
         "last error"}) {
-    EXPECT_EQ(values.count(key), 1u) << key;
+    EXPECT_NE(valueOf(status, key), "(none)") << key;
   }
+  EXPECT_GT(std::stoi(valueOf(rate, "Events since startup")), 0);
+  // Inputs stop while someone listens: stale after missing_input_timeout.
+  diagnostics.clear();
+  EXPECT_TRUE(waitFor(
+      [&] {
+        return diagnostics.latest("main", &status) &&
+               status.level == diagnostic_msgs::DiagnosticStatus::WARN &&
+               status.message.find("stale") != std::string::npos;
+      },
+      5.0))
+      << "level " << int(status.level) << ": " << status.message;
+  // Repeated bad input: ERROR, naming the topic.
+  for (int k = 0; k < 4; ++k) {
+    auto bad = client.messagesFor(sceneFrame(), newStamp());
+    bad.image->encoding = "nv12";  // not the bad-input test's (throttled) one
+    client.publish(bad);
+  }
+  diagnostics.clear();
+  EXPECT_TRUE(waitFor(
+      [&] {
+        return diagnostics.latest("main", &status) &&
+               status.level == diagnostic_msgs::DiagnosticStatus::ERROR;
+      },
+      3.0))
+      << "level " << int(status.level) << ": " << status.message;
+  EXPECT_NE(status.message.find("/image"), std::string::npos)
+      << status.message;
+  EXPECT_TRUE(answered(client, client.messagesFor(sceneFrame(), newStamp())));
 }
 
 /// One class of bad input: which rule of the node's input checks (see
