@@ -9,6 +9,8 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -18,6 +20,8 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/errors.h"
@@ -269,6 +273,73 @@ void checkSameSize(const std::string& what, const std::string& path,
   throw nf::InputError(message);
 }
 
+/// Throws InputError unless K is a pinhole camera matrix that gives a
+/// finite ray K^-1 (u, v, 1) for every pixel of a width x height image:
+/// fx, fy > 0 and within [1e-6 * image size, 1e7] pixels, the principal
+/// point within 100 image sizes of the image, last row (0, 0, 1). (The
+/// library's CameraIntrinsics::validate() checks finiteness and
+/// singularity only.)
+void checkIntrinsics(const nf::CameraIntrinsics& K, int width, int height,
+                     const std::string& path) {
+  const std::string where = "camera_info '" + path + "': ";
+  const auto number = [](double v) {
+    std::ostringstream text;
+    text << v;
+    return text.str();
+  };
+  const double size = std::max(width, height);
+  const double f_min = 1e-6 * size;
+  const double f_max = 1e7;
+  const std::pair<const char*, double> focal[] = {{"fx", K.fx()},
+                                                  {"fy", K.fy()}};
+  for (const auto& [name, f] : focal) {
+    if (!(f > 0.0)) {
+      throw nf::InputError(where + "focal length " + name + " = " + number(f) +
+                           "; expected fx, fy > 0 (pixels)");
+    }
+    if (!(f >= f_min && f <= f_max)) {
+      throw nf::InputError(where + "focal length " + name + " = " + number(f) +
+                           " is out of range for a " + sizeText(width, height) +
+                           " image; expected " + number(f_min) + " <= " + name +
+                           " <= " + number(f_max) + " pixels");
+    }
+  }
+  const std::tuple<const char*, double, int, const char*> centre[] = {
+      {"cx", K.cx(), width, "widths"}, {"cy", K.cy(), height, "heights"}};
+  for (const auto& [name, c, extent, unit] : centre) {
+    const double lo = -100.0 * extent;
+    const double hi = (extent - 1) + 100.0 * extent;
+    if (!(c >= lo && c <= hi)) {
+      throw nf::InputError(where + "principal point " + name + " = " +
+                           number(c) + " is more than 100 image " + unit +
+                           " outside the " + sizeText(width, height) +
+                           " image; expected " + number(lo) + " <= " + name +
+                           " <= " + number(hi));
+    }
+  }
+  if (K.K[3] != 0.0 || K.K[6] != 0.0 || K.K[7] != 0.0 || K.K[8] != 1.0) {
+    throw nf::InputError(
+        where + "expected K = [fx s cx; 0 fy cy; 0 0 1], got " +
+        "K[1][0] = " + number(K.K[3]) + ", last row (" + number(K.K[6]) + ", " +
+        number(K.K[7]) + ", " + number(K.K[8]) + ")");
+  }
+  // The rays of the corners (the largest), as the solver has them (float).
+  const std::array<double, 9> inv = K.inverse();
+  for (const double u : {0.0, width - 1.0}) {
+    for (const double v : {0.0, height - 1.0}) {
+      for (int row = 0; row < 3; ++row) {
+        const double r =
+            inv[3 * row] * u + inv[3 * row + 1] * v + inv[3 * row + 2];
+        if (!(std::abs(r) <= 1e30)) {
+          throw nf::InputError(where + "K gives no finite ray for pixel (" +
+                               number(u) + ", " + number(v) +
+                               ") (skew s = " + number(K.K[1]) + ")");
+        }
+      }
+    }
+  }
+}
+
 nf::FusionProblem loadProblem(const Options& options) {
   nf::FusionProblem problem;
   problem.image = nf::io::readImage(options.image_path);
@@ -285,6 +356,7 @@ nf::FusionProblem loadProblem(const Options& options) {
         sizeText(problem.image.width(), problem.image.height()) +
         ": expected the same size");
   }
+  checkIntrinsics(problem.K, info_width, info_height, options.camera_info_path);
   for (const InputSpec& spec : options.inputs) {
     nf::NormalInput input;
     input.normals = nf::io::readNormalMap(spec.normals_path);

@@ -10,20 +10,35 @@
 // into OUT.bag with the images' stamps (header and bag time). With the
 // parameter fixed_frame set, /tf and /tf_static of the bag feed the
 // rotation-compensated warm start.
+//
+// The input is only read. OUT is written under a temporary name beside it
+// and renamed to OUT at the end, after a complete write only: a failed run
+// (a full disk, a file size limit, an error) leaves no bag at OUT and removes
+// the temporary file. An OUT that is the input under any name is refused.
+// Message records that cannot be read are skipped and counted; the run then
+// ends with status 1.
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sys/stat.h>
 #include <tf2_msgs/TFMessage.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <iostream>
 #include <map>
+#include <memory>
+#include <new>
 #include <numeric>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -60,8 +75,13 @@ const char* const kUsage =
     "  --quiet                no progress bar\n"
     "  --help                 this text\n"
     "\n"
-    "Exit status: 0 on success, 1 when a bag cannot be read or written or\n"
-    "no set could be fused, 2 on a bad command line.\n";
+    "OUT is written under a temporary name beside it (OUT.partial-XXXXXX)\n"
+    "and renamed to OUT once complete; a failed run leaves no OUT. OUT must\n"
+    "not be IN.\n"
+    "\n"
+    "Exit status: 0 on success, 1 when a bag cannot be read or written, some\n"
+    "of its messages are unreadable (the others are fused) or no set could\n"
+    "be fused, 2 on a bad command line.\n";
 
 struct Options {
   std::string input, output, params;
@@ -155,6 +175,164 @@ nn::NodeSettings loadSettings(const Options& o) {
   return settings;
 }
 
+/// An error that ends the run: printed as one line "fuse_bag: <what>", exit
+/// status 1.
+class Fatal : public std::runtime_error {
+ public:
+  explicit Fatal(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// `what`, with the text of `error` (an errno value) when there is one.
+std::string withErrno(const std::string& what, int error) {
+  if (error == 0) return what;
+  return what + " (" + std::strerror(error) + ")";
+}
+
+/// A message on one line.
+std::string oneLine(std::string text) {
+  for (char& c : text) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  return text;
+}
+
+/// Refuses an output that is the input under another name (another
+/// spelling, a symbolic or a hard link): the same device and inode.
+void refuseOutputIsInput(const Options& o) {
+  struct stat in_stat {};
+  struct stat out_stat {};
+  if (::stat(o.input.c_str(), &in_stat) != 0) return;    // reported on reading
+  if (::stat(o.output.c_str(), &out_stat) != 0) return;  // a new file
+  if (in_stat.st_dev == out_stat.st_dev && in_stat.st_ino == out_stat.st_ino) {
+    throw Fatal("--output " + o.output + " is the input bag " + o.input +
+                "; refusing to overwrite it (choose another output path)");
+  }
+}
+
+/// The output bag. A regular file is written under a temporary name in its
+/// directory and renamed to the output path by commit() only; until then (a
+/// failed write, an error elsewhere) the destructor removes the temporary
+/// file. A device or a pipe is written in place.
+class OutputBag {
+ public:
+  explicit OutputBag(const std::string& path) : path_(path), final_(path) {
+    struct stat st {};
+    const bool exists = ::stat(path.c_str(), &st) == 0;
+    if (exists && S_ISDIR(st.st_mode)) fail("", EISDIR);
+    if (exists && !S_ISREG(st.st_mode)) {
+      open(path);
+      return;
+    }
+    if (exists) {
+      // A file the user may not write stays as it is (as with writing it in
+      // place), though the rename would replace it.
+      if (::access(path.c_str(), W_OK) != 0) {
+        const int error = errno;
+        fail("", error);
+      }
+      // Through a symbolic link: the bag replaces the file it points to.
+      if (char* real = ::realpath(path.c_str(), nullptr)) {
+        final_ = real;
+        std::free(real);
+      }
+    }
+    std::string temporary = final_ + ".partial-XXXXXX";
+    const int fd = ::mkstemp(&temporary[0]);
+    if (fd < 0) {
+      const int error = errno;
+      fail("", error);
+    }
+    temporary_ = temporary;
+    // The mode of the file replaced, else the one of a new file (mkstemp
+    // makes it 0600).
+    mode_t mode = st.st_mode & 07777;
+    if (!exists) {
+      const mode_t mask = ::umask(0);
+      ::umask(mask);
+      mode = 0666 & ~mask;
+    }
+    ::fchmod(fd, mode);
+    ::close(fd);
+    open(temporary_);
+  }
+
+  ~OutputBag() { discard(); }
+
+  OutputBag(const OutputBag&) = delete;
+  OutputBag& operator=(const OutputBag&) = delete;
+
+  template <typename M>
+  void write(const std::string& topic, const ros::Time& stamp,
+             const M& message) {
+    errno = 0;
+    try {
+      bag_->write(topic, stamp, message);
+    } catch (const std::exception& e) {
+      const int error = errno;
+      fail(e.what(), error);
+    }
+  }
+
+  /// Closes the bag and gives it its name.
+  void commit() {
+    errno = 0;
+    try {
+      bag_->close();
+    } catch (const std::exception& e) {
+      const int error = errno;
+      fail(e.what(), error);
+    }
+    closed_ = true;
+    if (temporary_.empty()) return;
+    if (::rename(temporary_.c_str(), final_.c_str()) != 0) {
+      const int error = errno;
+      fail("cannot rename " + temporary_ + " to " + final_, error);
+    }
+    temporary_.clear();
+  }
+
+ private:
+  void open(const std::string& file) {
+    bag_ = new rosbag::Bag;
+    errno = 0;
+    try {
+      bag_->open(file, rosbag::bagmode::Write);
+    } catch (const std::exception& e) {
+      const int error = errno;
+      discard();  // the destructor does not run after a throwing constructor
+      fail(e.what(), error);
+    }
+  }
+
+  /// Removes the temporary file. A bag not closed is left open, not
+  /// deleted: rosbag::Bag's destructor would close it, write its index and,
+  /// after a failed write, throw again (std::terminate).
+  void discard() {
+    if (!temporary_.empty()) ::unlink(temporary_.c_str());
+    temporary_.clear();
+    if (closed_) delete bag_;
+    bag_ = nullptr;
+  }
+
+  [[noreturn]] void fail(const std::string& what, int error) const {
+    std::string text = "cannot write " + path_;
+    if (!what.empty()) {
+      text += ": " + withErrno(what, error);
+    } else if (error != 0) {
+      text += std::string(": ") + std::strerror(error);
+    }
+    throw Fatal(text);
+  }
+
+  std::string path_;            ///< as given
+  std::string final_;           ///< the file that becomes the bag
+  std::string temporary_;       ///< written until commit(); empty when none
+  rosbag::Bag* bag_ = nullptr;  ///< deleted once closed only (see discard())
+  bool closed_ = false;
+};
+
+bool progress_line_open = false;  ///< the progress bar ends no line yet
+
 void progress(std::size_t done, std::size_t total, std::size_t frames,
               double seconds) {
   const int width = 30;
@@ -165,6 +343,14 @@ void progress(std::size_t done, std::size_t total, std::size_t frames,
                std::string(width - filled, ' ').c_str(), 100.0 * share, frames,
                seconds);
   std::fflush(stderr);
+  progress_line_open = true;
+}
+
+/// Ends the progress bar's line, if one is open.
+void endProgressLine() {
+  if (!progress_line_open) return;
+  std::fputc('\n', stderr);
+  progress_line_open = false;
 }
 
 double percentile(std::vector<double> values, double q) {
@@ -174,17 +360,10 @@ double percentile(std::vector<double> values, double q) {
   return values[i];
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  const Options o = parseOptions(argc, argv);
-  nn::NodeSettings settings;
-  try {
-    settings = loadSettings(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuse_bag: %s\n", e.what());
-    return 1;
-  }
+/// The run; throws Fatal (and whatever else goes wrong) to end it.
+int fuseBag(const Options& o) {
+  refuseOutputIsInput(o);
+  nn::NodeSettings settings = loadSettings(o);
   ros::Time::init();
 
   // Topics and their roles, as the node has them.
@@ -214,13 +393,32 @@ int main(int argc, char** argv) {
     topics.push_back(roles[j].name);
   }
 
-  rosbag::Bag in, out;
+  const bool show_progress = !o.quiet && isatty(fileno(stderr));
+  std::map<std::string, int> reported;  // errors printed per kind
+  auto reportAs = [&](const std::string& kind, const std::string& text) {
+    if (reported[kind]++ < 3) {
+      endProgressLine();
+      std::fprintf(stderr, "fuse_bag: %s\n", oneLine(text).c_str());
+    }
+  };
+  auto report = [&](const std::string& text) {
+    reportAs(text.substr(0, text.find(':')), text);
+  };
+  // Messages whose records cannot be read (corrupt bag): skipped, counted.
+  std::size_t unreadable = 0, tf_unreadable = 0;
+  auto reportUnreadable = [&](const rosbag::MessageInstance& m,
+                              const std::exception& e) {
+    char stamp[32];
+    std::snprintf(stamp, sizeof(stamp), "%.3f", m.getTime().toSec());
+    reportAs("unreadable", m.getTopic() + ": unreadable message at " + stamp +
+                               " s (" + e.what() + "); message skipped");
+  };
+
+  rosbag::Bag in;
   try {
     in.open(o.input, rosbag::bagmode::Read);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuse_bag: cannot read %s: %s\n", o.input.c_str(),
-                 e.what());
-    return 1;
+    throw Fatal("cannot read " + o.input + ": " + e.what());
   }
 
   // The bag's transforms, all loaded first, for the rotation lookup.
@@ -234,7 +432,14 @@ int main(int argc, char** argv) {
         in, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
     std::size_t transforms = 0;
     for (const rosbag::MessageInstance& m : tf_view) {
-      const auto tf = m.instantiate<tf2_msgs::TFMessage>();
+      tf2_msgs::TFMessage::ConstPtr tf;
+      try {
+        tf = m.instantiate<tf2_msgs::TFMessage>();
+      } catch (const std::exception& e) {
+        ++tf_unreadable;
+        reportUnreadable(m, e);
+        continue;
+      }
       if (!tf) continue;
       for (const auto& t : tf->transforms) {
         tf_buffer->setTransform(t, "bag", m.getTopic() == "/tf_static");
@@ -260,17 +465,9 @@ int main(int argc, char** argv) {
     if (!seen[j]) missing += " " + roles[j].name;
   }
   if (!missing.empty()) {
-    std::fprintf(stderr, "fuse_bag: %s has no messages on:%s\n",
-                 o.input.c_str(), missing.c_str());
-    return 1;
+    throw Fatal(o.input + " has no messages on:" + missing);
   }
-  try {
-    out.open(o.output, rosbag::bagmode::Write);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuse_bag: cannot write %s: %s\n", o.output.c_str(),
-                 e.what());
-    return 1;
-  }
+  OutputBag out(o.output);
 
   using Synchronizer = nn::StampSynchronizer<nn::QueuedMessage>;
   Synchronizer::Options sync_options;
@@ -285,20 +482,11 @@ int main(int argc, char** argv) {
   std::uint64_t skipped = 0, bad_messages = 0;
   std::vector<double> solve_times, iterations;
   std::size_t warm = 0, done = 0;
-  const bool show_progress = !o.quiet && isatty(fileno(stderr));
   const auto started = std::chrono::steady_clock::now();
   auto elapsed = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() -
                                          started)
         .count();
-  };
-  std::map<std::string, int> reported;  // errors printed per kind
-  auto report = [&](const std::string& text) {
-    const std::string key = text.substr(0, text.find(':'));
-    if (reported[key]++ < 3) {
-      if (show_progress) std::fputc('\n', stderr);
-      std::fprintf(stderr, "fuse_bag: %s\n", text.c_str());
-    }
   };
   nn::PipelineOutput output;
   auto processSets = [&](std::vector<Synchronizer::Set> sets) {
@@ -311,10 +499,14 @@ int main(int argc, char** argv) {
       }
     }
     for (const auto& set : sets) {
-      const nn::InputSet input = nn::inputSetFrom(
-          roles, set.messages, set.present, settings.num_inputs);
+      // Unusable input skips the frame, as in the node; running out of
+      // memory ends the run.
       try {
+        const nn::InputSet input = nn::inputSetFrom(
+            roles, set.messages, set.present, settings.num_inputs);
         pipeline.process(input, rotation, o.vis, &output);
+      } catch (const std::bad_alloc&) {
+        throw Fatal("out of memory while fusing a set");
       } catch (const std::exception& e) {
         ++skipped;
         report(std::string(e.what()) + "; frame skipped");
@@ -335,51 +527,66 @@ int main(int argc, char** argv) {
   };
 
   std::size_t read = 0;
-  for (const rosbag::MessageInstance& m : view) {
-    ++read;
-    const int topic = topic_index.at(m.getTopic());
-    nn::QueuedMessage message;
-    const std_msgs::Header* header = nullptr;
-    if (roles[topic].kind == nn::TopicRole::kCameraInfo) {
-      message.info = m.instantiate<sensor_msgs::CameraInfo>();
-      if (message.info) header = &message.info->header;
-    } else {
-      message.image = m.instantiate<sensor_msgs::Image>();
-      if (message.image) header = &message.image->header;
+  try {
+    for (const rosbag::MessageInstance& m : view) {
+      ++read;
+      const int topic = topic_index.at(m.getTopic());
+      nn::QueuedMessage message;
+      const std_msgs::Header* header = nullptr;
+      try {
+        if (roles[topic].kind == nn::TopicRole::kCameraInfo) {
+          message.info = m.instantiate<sensor_msgs::CameraInfo>();
+          if (message.info) header = &message.info->header;
+        } else {
+          message.image = m.instantiate<sensor_msgs::Image>();
+          if (message.image) header = &message.image->header;
+        }
+      } catch (const std::bad_alloc&) {
+        throw;
+      } catch (const std::exception& e) {
+        // A corrupt record (rosbag::BagException, a serialization
+        // overrun): the bag's index still leads to the next message.
+        ++unreadable;
+        reportUnreadable(m, e);
+        continue;
+      }
+      if (header == nullptr) {
+        ++bad_messages;
+        report(m.getTopic() + ": unexpected message type " + m.getDataType());
+        continue;
+      }
+      try {
+        nn::precheckMessage(roles[topic].name, *header, message.image.get());
+      } catch (const nf::Error& e) {
+        ++bad_messages;
+        report(std::string(e.what()) + "; message skipped");
+        continue;
+      }
+      const auto result = sync.add(topic, header->stamp.toNSec(), message);
+      if (result == Synchronizer::AddResult::kOutOfOrder) {
+        ++bad_messages;
+        report(roles[topic].name + ": stamp out of order; message skipped");
+        continue;
+      }
+      if (result == Synchronizer::AddResult::kTimeReset) {
+        report(roles[topic].name + ": time jumped back; synchronizer reset");
+      }
+      processSets(sync.poll());
+      if (show_progress && (read % 8 == 0 || read == total)) {
+        progress(read, total, solve_times.size(), elapsed());
+      }
     }
-    if (header == nullptr) {
-      ++bad_messages;
-      report(m.getTopic() + ": unexpected message type " + m.getDataType());
-      continue;
-    }
-    try {
-      nn::precheckMessage(roles[topic].name, *header, message.image.get());
-    } catch (const nf::Error& e) {
-      ++bad_messages;
-      report(std::string(e.what()) + "; message skipped");
-      continue;
-    }
-    const auto result = sync.add(topic, header->stamp.toNSec(), message);
-    if (result == Synchronizer::AddResult::kOutOfOrder) {
-      ++bad_messages;
-      report(roles[topic].name + ": stamp out of order; message skipped");
-      continue;
-    }
-    if (result == Synchronizer::AddResult::kTimeReset) {
-      report(roles[topic].name + ": time jumped back; synchronizer reset");
-    }
-    processSets(sync.poll());
-    if (show_progress && (read % 8 == 0 || read == total)) {
-      progress(read, total, solve_times.size(), elapsed());
-    }
+  } catch (const rosbag::BagException& e) {
+    // Writing errors come as Fatal: this one is of the input.
+    throw Fatal("cannot read " + o.input + ": " + e.what());
   }
   processSets(sync.flush());
   done = solve_times.size();
-  out.close();
+  out.commit();
   in.close();
   if (show_progress) {
     progress(total, total, done, elapsed());
-    std::fputc('\n', stderr);
+    endProgressLine();
   }
 
   const double wall = elapsed();
@@ -394,6 +601,10 @@ int main(int argc, char** argv) {
   std::printf("fuse_bag: %s -> %s\n", o.input.c_str(), o.output.c_str());
   std::printf("  inputs:             %zu messages on %zu topics, %d input(s)\n",
               total, roles.size(), settings.num_inputs);
+  std::printf(
+      "  unreadable:         %zu of %zu messages (corrupt records, "
+      "skipped)\n",
+      unreadable, total);
   std::printf("  frames fused:       %zu (%zu warm-started)\n", done, warm);
   std::printf("  images without set: %llu\n",
               static_cast<unsigned long long>(sync.unmatchedPivots()));
@@ -408,5 +619,48 @@ int main(int argc, char** argv) {
   std::printf("  inner iterations:   mean %.0f per frame\n", mean_iterations);
   std::printf("  wall time:          %.2f s (%.1f frames/s)\n", wall,
               wall > 0 ? done / wall : 0.0);
-  return done > 0 ? 0 : 1;
+  std::fflush(stdout);
+  if (unreadable > 0 || tf_unreadable > 0) {
+    std::string text = o.input + ": " + std::to_string(unreadable) + " of " +
+                       std::to_string(total) + " messages";
+    if (tf_unreadable > 0) {
+      text += " and " + std::to_string(tf_unreadable) + " of /tf, /tf_static";
+    }
+    std::fprintf(stderr,
+                 "fuse_bag: %s could not be read (corrupt records); %s has "
+                 "the sets of the others\n",
+                 text.c_str(), o.output.c_str());
+    return 1;
+  }
+  if (done == 0) {
+    std::fprintf(stderr, "fuse_bag: no set could be fused (%s is empty)\n",
+                 o.output.c_str());
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Past a file size limit (ulimit -f), a write fails with EFBIG and is
+  // reported, instead of the signal ending the process.
+  std::signal(SIGXFSZ, SIG_IGN);
+  const Options o = parseOptions(argc, argv);
+  const char* text = nullptr;
+  std::string message;
+  try {
+    return fuseBag(o);
+  } catch (const std::bad_alloc&) {
+    text = "out of memory";
+  } catch (const std::exception& e) {
+    message = oneLine(e.what());
+    text = message.c_str();
+  } catch (...) {
+    text = "unknown error";
+  }
+  std::fflush(stdout);
+  endProgressLine();
+  std::fprintf(stderr, "fuse_bag: %s\n", text);
+  return 1;
 }

@@ -334,6 +334,66 @@ TEST_F(FuseNormalsCliTest, BadFilesAreInputErrors) {
   expectOneLineError(result, "no_dir");
 }
 
+TEST_F(FuseNormalsCliTest, AbsurdIntrinsicsAreInputErrors) {
+  // camera_info files written as text: the values are ones a writer that
+  // validates K may refuse.
+  const auto cameraInfo = [&](const std::string& name, const std::string& fx,
+                              const std::string& fy, const std::string& cx,
+                              const std::string& cy) {
+    std::ofstream(path(name))
+        << "image_width: " << kWidth << "\nimage_height: " << kHeight
+        << "\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [" << fx << ", 0, "
+        << cx << ", 0, " << fy << ", " << cy << ", 0, 0, 1]\n";
+    return path(name);
+  };
+  struct Case {
+    std::string camera_info, needle;
+  };
+  const std::vector<Case> cases = {
+      {cameraInfo("negative_fx.yaml", "-30", "30", "15.5", "11.5"),
+       "focal length fx = -30"},
+      {cameraInfo("negative_fy.yaml", "30", "-30", "15.5", "11.5"),
+       "focal length fy = -30"},
+      {cameraInfo("negative_both.yaml", "-30", "-30", "15.5", "11.5"),
+       "focal length fx = -30"},
+      {cameraInfo("tiny_f.yaml", "1e-150", "1e-150", "15.5", "11.5"),
+       "focal length fx = 1e-150"},
+      {cameraInfo("tiny_fx.yaml", "1e-150", "30", "15.5", "11.5"),
+       "fx = 1e-150"},
+      {cameraInfo("huge_f.yaml", "1e30", "1e30", "15.5", "11.5"),
+       "focal length fx = 1e+30"},
+      {cameraInfo("far_cx.yaml", "30", "30", "1e30", "11.5"),
+       "principal point cx = 1e+30"},
+      {cameraInfo("far_cy.yaml", "30", "30", "15.5", "-1e30"),
+       "principal point cy = -1e+30"},
+      {cameraInfo("far_cy_small.yaml", "30", "30", "15.5", "5000"),
+       "principal point cy = 5000"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.camera_info);
+    fs::remove(path("fused.exr"));
+    const RunResult result = runTool(
+        {"--image", path("image.png"), "--camera-info", c.camera_info,
+         "--normals", path("noisy.exr"), "--output", path("fused.exr")});
+    EXPECT_EQ(result.exit_code, 1);
+    expectOneLineError(result, c.needle);
+    EXPECT_NE(result.err.find(c.camera_info), std::string::npos) << result.err;
+    EXPECT_FALSE(fs::exists(path("fused.exr")));
+  }
+  // Unusual but sound intrinsics still work: a principal point outside the
+  // image (a crop), a long focal length.
+  for (const std::string& file :
+       {cameraInfo("crop.yaml", "30", "30", "-200", "300"),
+        cameraInfo("tele.yaml", "1e6", "1e6", "15.5", "11.5")}) {
+    SCOPED_TRACE(file);
+    std::vector<std::string> args = {
+        "--image",  path("image.png"), "--camera-info", file,
+        "--output", path("fused.exr"), "--normals",     path("noisy.exr")};
+    const RunResult result = runTool(args);
+    EXPECT_EQ(result.exit_code, 0) << result.err;
+  }
+}
+
 TEST_F(FuseNormalsCliTest, UsageErrorsExitWithTwo) {
   const std::vector<std::string> input = {"--normals", path("noisy.exr")};
   const auto withInput = [&](std::vector<std::string> extra) {
