@@ -426,7 +426,9 @@ int fuseBag(const Options& o) {
   nn::RotationLookup rotation;
   if (!settings.fixed_frame.empty()) {
     rosbag::View all(in);
-    const double span = (all.getEndTime() - all.getBeginTime()).toSec() + 10.0;
+    // The whole bag's transforms are kept (a Duration holds at most 2^31 s).
+    const double span = std::min(
+        nn::secondsBetween(all.getEndTime(), all.getBeginTime()) + 10.0, 2e9);
     tf_buffer = std::make_unique<tf2::BufferCore>(ros::Duration(span));
     rosbag::View tf_view(
         in, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
@@ -476,6 +478,8 @@ int fuseBag(const Options& o) {
   sync_options.max_interval_ns =
       static_cast<std::int64_t>(settings.max_interval * 1e9 + 0.5);
   Synchronizer sync(nn::requiredTopics(roles, settings), sync_options);
+  nn::MessageLimits limits;
+  limits.max_pixels = static_cast<std::uint64_t>(settings.max_pixels);
   nn::FusionPipeline pipeline(settings,
                               nn::topicNamesOf(roles, settings.num_inputs));
 
@@ -556,7 +560,8 @@ int fuseBag(const Options& o) {
         continue;
       }
       try {
-        nn::precheckMessage(roles[topic].name, *header, message.image.get());
+        nn::precheckMessage(roles[topic].name, *header, message.image.get(),
+                            limits);
       } catch (const nf::Error& e) {
         ++bad_messages;
         report(std::string(e.what()) + "; message skipped");
