@@ -41,6 +41,8 @@ struct SolverState {
   /// the first warm frame does not pay for it.
   void resize(int width, int height, int num_inputs);
   void clear();
+  /// Bytes of memory its buffers hold (their capacity).
+  std::size_t bytesHeld() const;
 };
 
 /// What a solve did.
@@ -92,6 +94,11 @@ class SolverImpl;
 
 /// Solves frame after frame, reusing its buffers. Not thread-safe: one solve at
 /// a time per instance.
+///
+/// Memory: buffers are sized on the first frame of a size and reused, so a
+/// stream of frames of one size allocates nothing once running; a frame
+/// much smaller than the one before (below a quarter of the values a buffer
+/// has room for) gives the larger buffers' memory back (PlanarImage::resize()).
 class Solver {
  public:
   explicit Solver(const SolverSettings& settings = SolverSettings());
@@ -127,6 +134,10 @@ class Solver {
 
   /// Convenience: cold start, returns the fused normals.
   NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);
+
+  /// Bytes of memory the solver's own buffers hold (prepared levels,
+  /// iteration state, scratch; not the caller's SolverState).
+  std::size_t bytesHeld() const;
 
  private:
   std::unique_ptr<SolverImpl> impl_;

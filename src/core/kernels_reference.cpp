@@ -9,12 +9,39 @@ namespace normal_fusion {
 namespace internal {
 
 void IterationState::resize(int width, int height, int num_inputs) {
-  for (PlanarImage* image :
-       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
+  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v}) {
+    image->resizeKeepingCapacity(width, height, 3);
+  }
+  q.resize(num_inputs);
+  for (PlanarImage& q_l : q) q_l.resizeKeepingCapacity(width, height, 3);
+}
+
+void IterationState::fit(int width, int height, int num_inputs, int threads) {
+  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v}) {
     image->resize(width, height, 3);
   }
   q.resize(num_inputs);
   for (PlanarImage& q_l : q) q_l.resize(width, height, 3);
+  // The reference backend's scratch (sized by runInnerReference() when it
+  // runs) and the fast backend's rows (three per thread, grown by
+  // runInnerFast()): released when sized for a much larger image.
+  const std::size_t values = static_cast<std::size_t>(3) * width * height;
+  for (PlanarImage* image : {&grad_h, &grad_v, &div, &q_sum}) {
+    if (values < image->bytesHeld() / sizeof(float) / 4) *image = PlanarImage();
+  }
+  releaseIfOversized(row_scratch,
+                     static_cast<std::size_t>(3) * width * threads);
+}
+
+std::size_t IterationState::bytesHeld() const {
+  std::size_t bytes = 0;
+  for (const PlanarImage* image :
+       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
+    bytes += image->bytesHeld();
+  }
+  for (const PlanarImage& q_l : q) bytes += q_l.bytesHeld();
+  return bytes + internal::bytesHeld(row_scratch) +
+         internal::bytesHeld(progress);
 }
 
 namespace reference {
@@ -153,6 +180,11 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
 void runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& s, int iterations) {
   const std::size_t N = s.n.pixelCount();
+  // Scratch of the level's size (allocated once per size: the finest level
+  // sets the capacity that the coarser ones reuse).
+  for (PlanarImage* image : {&s.grad_h, &s.grad_v, &s.div, &s.q_sum}) {
+    image->resizeKeepingCapacity(s.n.width(), s.n.height(), 3);
+  }
   for (int it = 0; it < iterations; ++it) {
     // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d
     // nbar).

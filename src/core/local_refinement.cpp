@@ -22,13 +22,26 @@ void ActiveSet::preallocate(int W, int H) {
   const std::size_t N = static_cast<std::size_t>(W) * H;
   width = W;
   height = H;
+  // Buffers of a much larger image give their memory back.
+  releaseIfOversized(mask, N);
+  releaseIfOversized(scratch, N);
   mask.assign(N, 0);
   scratch.assign(N, 0);
   // Every entry written once (then cleared): the pages exist from now on.
   for (auto* list : {&pixels, &links_h, &links_v, &links_up, &links_down}) {
+    releaseIfOversized(*list, N);
     list->assign(N, 0);
     list->clear();
   }
+}
+
+std::size_t ActiveSet::bytesHeld() const {
+  std::size_t bytes = internal::bytesHeld(mask) + internal::bytesHeld(scratch);
+  for (const auto* list :
+       {&pixels, &links_h, &links_v, &links_up, &links_down}) {
+    bytes += internal::bytesHeld(*list);
+  }
+  return bytes;
 }
 
 void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
@@ -202,6 +215,23 @@ void ActiveBuffers::preallocate(int W, int H, int L, int active) {
   growTo(block_sums, (links + kEnergyBlock - 1) / kEnergyBlock +
                          L * ((P + kEnergyBlock - 1) / kEnergyBlock));
   for (auto* list : {&left_link, &above_link}) growTo(*list, P);
+}
+
+std::size_t ActiveBuffers::bytesHeld() const {
+  std::size_t bytes =
+      internal::bytesHeld(node_pixel) + internal::bytesHeld(node_of) +
+      internal::bytesHeld(q) + internal::bytesHeld(f) + internal::bytesHeld(c) +
+      internal::bytesHeld(delta) + internal::bytesHeld(left_link) +
+      internal::bytesHeld(above_link) + internal::bytesHeld(link_a) +
+      internal::bytesHeld(link_b) + internal::bytesHeld(link_pixel) +
+      internal::bytesHeld(link_w) + internal::bytesHeld(block_sums);
+  for (int ch = 0; ch < 3; ++ch) {
+    for (const auto* v :
+         {&nbar[ch], &n[ch], &n0[ch], &ray[ch], &p[ch], &d[ch], &node_n[ch]}) {
+      bytes += internal::bytesHeld(*v);
+    }
+  }
+  return bytes;
 }
 
 void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,

@@ -219,6 +219,15 @@ void prepareFinestInto(const FusionProblem& problem,
   }
 }
 
+std::size_t PreparedLevel::bytesHeld() const {
+  std::size_t bytes = edge_weight.bytesHeld() + image.bytesHeld();
+  for (const std::vector<PlanarImage>* images :
+       {&data, &data_weight, &data_eps, &data_mean}) {
+    for (const PlanarImage& i : *images) bytes += i.bytesHeld();
+  }
+  return bytes;
+}
+
 void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
   const int W = level.width, H = level.height;
   // True when some input observes pixel (x, y) (c_l > 0).
@@ -357,10 +366,11 @@ void applyLocalStatistics(const SolverSettings& settings,
   {
     // Per thread: window sums of f and of the valid count, down the columns
     // (col_*) and then along the row (win_*); grown once, then reused.
+    // (Rows of a much wider image give their memory back.)
     thread_local std::vector<float> scratch;
-    if (scratch.size() < 11 * static_cast<std::size_t>(W)) {
-      scratch.resize(11 * static_cast<std::size_t>(W));
-    }
+    const std::size_t scratch_values = 11 * static_cast<std::size_t>(W);
+    releaseIfOversized(scratch, scratch_values);
+    if (scratch.size() < scratch_values) scratch.resize(scratch_values);
     float* ratio = scratch.data() + 8 * W;
     float* unused_delta = scratch.data() + 9 * W;
     float* spread = scratch.data() + 10 * W;
@@ -524,7 +534,7 @@ void coldNormal(const PreparedLevel& level, VisibilityMode mode, int x, int y,
 
 void initializeCold(const PreparedLevel& level, VisibilityMode mode,
                     PlanarImage& n, int threads) {
-  n.resize(level.width, level.height, 3);
+  n.resizeKeepingCapacity(level.width, level.height, 3);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < level.height; ++y) {
     for (int x = 0; x < level.width; ++x) {
@@ -585,7 +595,7 @@ NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
 /// normalizes, and projects onto the visible set in soft mode.
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
                      VisibilityMode mode, PlanarImage& n) {
-  n.resize(fine.width, fine.height, 3);
+  n.resizeKeepingCapacity(fine.width, fine.height, 3);
   const double sx = static_cast<double>(coarse.width()) / fine.width;
   const double sy = static_cast<double>(coarse.height()) / fine.height;
   for (int y = 0; y < fine.height; ++y) {
@@ -625,7 +635,7 @@ void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
 /// n <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
 /// tangent plane).
 void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
-  out.resize(n.width(), n.height(), 3);
+  out.resizeKeepingCapacity(n.width(), n.height(), 3);
   const long N = static_cast<long>(n.pixelCount());
   const float* nx = n.plane(0);
   const float* ny = n.plane(1);
@@ -797,6 +807,13 @@ void SolverState::clear() {
   dual_data.clear();
 }
 
+std::size_t SolverState::bytesHeld() const {
+  std::size_t bytes =
+      normals.bytesHeld() + dual_h.bytesHeld() + dual_v.bytesHeld();
+  for (const PlanarImage& q : dual_data) bytes += q.bytesHeld();
+  return bytes;
+}
+
 namespace {
 
 /// Seconds from `t` to now.
@@ -855,6 +872,7 @@ class SolverImpl {
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
     report.filled_pixels = W * H - finest.valid_pixels;
+    fitBuffers(W, H, L);
 
     const bool use_warm = warm && out.compatible(W, H, L);
     if (warm && !use_warm && has_deadline_) {
@@ -895,6 +913,7 @@ class SolverImpl {
         ++num_levels;
       }
     }
+    releaseUnusedLevels(num_levels);
     report.pyramid_levels = num_levels;
     report.prepare_seconds = secondsSince(start);
 
@@ -996,7 +1015,66 @@ class SolverImpl {
     report.seconds = secondsSince(start);
   }
 
+  /// Solver::bytesHeld().
+  std::size_t bytesHeld() const {
+    std::size_t bytes = state_.bytesHeld() + candidate_.bytesHeld() +
+                        coarse_result_.bytesHeld() + edge_scratch_.bytesHeld() +
+                        active_.bytesHeld() + active_buffers_.bytesHeld() +
+                        internal::bytesHeld(edge_scratch_map_) +
+                        internal::bytesHeld(fill_pending_) +
+                        internal::bytesHeld(unknown_) +
+                        internal::bytesHeld(n_saved_);
+    for (const PreparedLevel& level : levels_) bytes += level.bytesHeld();
+    return bytes;
+  }
+
  private:
+  /// Gives back the memory of the buffers that every level of a solve
+  /// shares, and of those of the warm start, when they were sized for a much
+  /// larger image than this one (W x H, L inputs): more than 4 times what it
+  /// needs (PlanarImage::resize()'s rule; the same size never reallocates).
+  /// The finest level's own buffers follow the rule as they are prepared.
+  void fitBuffers(int W, int H, int L) {
+    const std::size_t N = static_cast<std::size_t>(W) * H;
+    state_.fit(W, H, L, threads_);
+    if (3 * N < candidate_.bytesHeld() / sizeof(float) / 4) {
+      candidate_ = PlanarImage();
+    }
+    if (3 * N < coarse_result_.bytesHeld() / sizeof(float) / 4) {
+      coarse_result_ = PlanarImage();
+    }
+    for (std::vector<float>* v :
+         {&edge_scratch_.mag_h, &edge_scratch_.mag_v, &edge_scratch_.plane,
+          &edge_scratch_.blurred, &edge_scratch_.blur}) {
+      internal::releaseIfOversized(*v, N);
+    }
+    internal::releaseIfOversized(unknown_, N);
+    internal::releaseIfOversized(edge_scratch_map_, N);
+    internal::releaseIfOversized(fill_pending_, N);
+    internal::releaseIfOversized(n_saved_, 3 * N);
+    // The refinement's buffers hold room for up to every pixel of the image
+    // they were sized for (ActiveSet: its mask, one entry per pixel).
+    if (N < active_.mask.capacity() / 4) active_ = internal::ActiveSet();
+    if (N < active_buffers_.node_of.capacity() / 4) {
+      active_buffers_ = internal::ActiveBuffers();
+    }
+  }
+
+  /// Releases the pyramid levels past `used` that a much larger image left:
+  /// more than 4 times the pixels this image's level of that depth has. (A
+  /// stream of one size keeps its cold start's levels for the next one.)
+  void releaseUnusedLevels(int used) {
+    int w = levels_[0].width, h = levels_[0].height;
+    for (int li = 1; li < static_cast<int>(levels_.size()); ++li) {
+      w = (w + 1) / 2;
+      h = (h + 1) / 2;
+      if (li < used) continue;
+      const long pixels =
+          static_cast<long>(levels_[li].width) * levels_[li].height;
+      if (pixels / 4 > static_cast<long>(w) * h) levels_[li] = PreparedLevel();
+    }
+  }
+
   IterationState state_;
   PlanarImage candidate_;
   std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges(), fill
@@ -1007,7 +1085,9 @@ class SolverImpl {
   double level_seconds_ = 0.0;  ///< least cost of the finest level, measured
   std::vector<float>
       n_saved_;  ///< reference refinement: iterate while normalized
-  std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
+  /// Finest first; grown (releaseUnusedLevels() frees what a larger image
+  /// left).
+  std::vector<PreparedLevel> levels_;
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
   Clock::time_point deadline_;
@@ -1348,6 +1428,8 @@ SolveReport Solver::solve(const FusionProblem& problem, SolverState& state,
   impl_->solve(problem, state, warm_start, report);
   return report;
 }
+
+std::size_t Solver::bytesHeld() const { return impl_->bytesHeld(); }
 
 void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {
   impl_->budget_start_ = frame_start;

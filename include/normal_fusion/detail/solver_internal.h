@@ -14,6 +14,20 @@
 namespace normal_fusion {
 namespace internal {
 
+/// Bytes of memory a vector holds (its capacity, not its size).
+template <typename T, typename A>
+std::size_t bytesHeld(const std::vector<T, A>& v) {
+  return v.capacity() * sizeof(T);
+}
+
+/// Gives back the memory of a vector sized for a much larger image: room
+/// for more than 4 times the `values` it needs now (PlanarImage::resize()'s
+/// rule). Its contents are then gone.
+template <typename T, typename A>
+void releaseIfOversized(std::vector<T, A>& v, std::size_t values) {
+  if (values < v.capacity() / 4) std::vector<T, A>().swap(v);
+}
+
 /// A problem after input preparation, at one pyramid level: everything the
 /// inner iterations read and never write.
 struct PreparedLevel {
@@ -45,6 +59,9 @@ struct PreparedLevel {
   }
   int valid_pixels = 0;
 
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
+
   /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
   void ray(int x, int y, float r[3]) const {
     r[0] = static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]);
@@ -73,14 +90,23 @@ struct IterationState {
   PlanarImage p_h;   ///< dual of the horizontal differences, 3 planes
   PlanarImage p_v;   ///< dual of the vertical differences, 3 planes
   std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
-  // Scratch of the reference backend: gradients, divergence, data-dual sum.
+  // Scratch of the reference backend: gradients, divergence, data-dual sum
+  // (sized by runInnerReference(), so the fast backend holds none).
   PlanarImage grad_h, grad_v, div, q_sum;
   // Scratch of the fast backend: three rows per thread, and each thread's
   // progress through the rows (the temporal-blocking pipeline).
   std::vector<float> row_scratch;
   std::vector<std::atomic<long>> progress;
 
+  /// Sizes every buffer for one level of a solve, keeping the capacity (the
+  /// pyramid's levels reuse the finest level's buffers).
   void resize(int width, int height, int num_inputs);
+  /// Sizes them for the finest level of a solve (PlanarImage::resize():
+  /// buffers sized for a much larger image give their memory back, and so
+  /// does the fast backend's row scratch, sized for `threads` threads).
+  void fit(int width, int height, int num_inputs, int threads);
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// The pixels of a local refinement and the links that touch them. Buffers
@@ -105,6 +131,8 @@ struct ActiveSet {
   /// Sizes the buffers for a W x H image (written once).
   void preallocate(int width, int height);
   bool empty() const { return pixels.empty(); }
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// Runs `iterations` Chambolle-Pock iterations of the subproblem on the
@@ -201,6 +229,8 @@ struct ActiveBuffers {
   /// Writes n0 (into state.n0) and the duals of the links and data terms
   /// back, with `threads`.
   void scatter(IterationState& state, int threads = 1) const;
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// Picks the thread count of the local refinement's steps from their
@@ -383,6 +413,8 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
 /// Buffers of the edge-weight computation, reused from frame to frame.
 struct EdgeWeightScratch {
   std::vector<float> mag_h, mag_v, plane, blurred, blur, kernel;
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// computeEdgeWeights() into reused buffers, with `threads` threads.
