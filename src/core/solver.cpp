@@ -592,12 +592,14 @@ NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
 }
 
 /// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
-/// normalizes, and projects onto the visible set in soft mode.
+/// normalizes, and projects onto the visible set in soft mode (rows shared by
+/// `threads`).
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
-                     VisibilityMode mode, PlanarImage& n) {
+                     VisibilityMode mode, PlanarImage& n, int threads) {
   n.resizeKeepingCapacity(fine.width, fine.height, 3);
   const double sx = static_cast<double>(coarse.width()) / fine.width;
   const double sy = static_cast<double>(coarse.height()) / fine.height;
+#pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < fine.height; ++y) {
     const double cy =
         std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), coarse.height() - 1.0);
@@ -964,7 +966,8 @@ class SolverImpl {
         }
       } else {
         if (li + 1 < num_levels) {
-          upsampleNormals(coarse_result_, level, settings_.visibility, s.n0);
+          upsampleNormals(coarse_result_, level, settings_.visibility, s.n0,
+                          threads_);
         } else {
           initializeCold(level, settings_.visibility, s.n0, threads_);
         }
