@@ -177,7 +177,7 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
 
 }  // namespace reference
 
-void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& s, int iterations) {
   const std::size_t N = s.n.pixelCount();
   // Scratch of the level's size (allocated once per size: the finest level
@@ -186,6 +186,8 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
     image->resizeKeepingCapacity(s.n.width(), s.n.height(), 3);
   }
   for (int it = 0; it < iterations; ++it) {
+    // A stop request ends the run between iterations.
+    if (stopRequested(params.cancel)) return false;
     // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d
     // nbar).
     reference::gradient(s.nbar, s.grad_h, s.grad_v);
@@ -210,6 +212,7 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
     reference::divergence(s.p_h, s.p_v, s.div);
     reference::primalStep(level, params, s.div, s.q_sum, s.n0, s.n, s.nbar);
   }
+  return true;
 }
 
 }  // namespace internal

@@ -114,7 +114,7 @@ inline void linkDualStep(const PlanarImage& nbar, PlanarImage& p, float w,
 
 }  // namespace
 
-void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+bool runInnerActive(const PreparedLevel& level, const InnerParams& params,
                     IterationState& s, const ActiveSet& active,
                     int iterations) {
   const int W = level.width, H = level.height;
@@ -123,8 +123,17 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
   const long num_px = static_cast<long>(active.pixels.size());
   const float* w_h = level.edge_weight.plane(0);
   const float* w_v = level.edge_weight.plane(1);
+  // The stop request, read by one thread before each iteration (the single
+  // construct's barrier then gives every thread the same decision).
+  bool stop = false;
 #pragma omp parallel num_threads(params.num_threads)
   for (int it = 0; it < iterations; ++it) {
+    // A stop request ends the run before the iteration.
+#pragma omp single
+    stop = stopRequested(params.cancel);
+    if (stop) {
+      break;
+    }
     // Dual ascent on the smoothness terms of the links that touch an active
     // pixel: p_d <- prox(p_d + sigma grad_d nbar).
 #pragma omp for schedule(static) nowait
@@ -182,6 +191,7 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
       }
     }
   }
+  return !stop;
 }
 
 namespace {
@@ -573,7 +583,8 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
                        std::vector<unsigned char>& filled,
-                       std::vector<int>& pending, int threads) {
+                       std::vector<int>& pending, int threads,
+                       const std::atomic<bool>* cancel) {
   const int W = level.width, H = level.height;
   // The unknown pixels, in ascending order; each pass visits only those left.
   pending.clear();
@@ -585,7 +596,9 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
   // 4-neighbour (known before this pass) takes its best candidate. Within a
   // pass, pixels read only known ones and write only themselves (in
   // parallel); they become known after it.
-  for (int pass = 0; pass < max_passes && !pending.empty(); ++pass) {
+  for (int pass = 0;
+       pass < max_passes && !pending.empty() && !stopRequested(cancel);
+       ++pass) {
     const long count = static_cast<long>(pending.size());
     long filled_now = 0;
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(+ : filled_now)

@@ -80,7 +80,16 @@ struct InnerParams {
   bool soft_visibility = false;
   int num_threads = 1;
   int block_depth = 6;  ///< iterations per thread per sweep (fast backend)
+  /// Stop request (Solver::requestCancel()), or null: none. The kernels
+  /// read it between rows (fast backend) or iterations and return early
+  /// once it is set.
+  const std::atomic<bool>* cancel = nullptr;
 };
+
+/// True when a stop request is set (`cancel` may be null: none).
+inline bool stopRequested(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
 
 /// Variables of the primal-dual iteration (allocated once per size).
 struct IterationState {
@@ -139,7 +148,10 @@ struct ActiveSet {
 /// active pixels, every other pixel held at n (= nbar = n0 there): the duals
 /// of the links that touch an active pixel, the data duals and the primal
 /// step at active pixels, each the reference backend's per-pixel step.
-void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+/// Returns false when params.cancel stopped it before the last iteration
+/// (read before each one; n and nbar are then those of an unfinished
+/// iteration, and only n0 and the duals are to be used).
+bool runInnerActive(const PreparedLevel& level, const InnerParams& params,
                     IterationState& state, const ActiveSet& active,
                     int iterations);
 
@@ -159,13 +171,14 @@ void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
 /// their normal.
 /// `filled` and `pending` are scratch (grown to the unknown pixels' count;
 /// reserve them once for a stream without allocations); `threads` share
-/// each pass.
+/// each pass. A set `cancel` (read before each pass) ends it early.
 void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
                        std::vector<unsigned char>& filled,
-                       std::vector<int>& pending, int threads);
+                       std::vector<int>& pending, int threads,
+                       const std::atomic<bool>* cancel = nullptr);
 
 /// The variables of a local refinement gathered into contiguous arrays, one
 /// array per component (the fast path of runInnerActive()). Nodes are the
@@ -271,8 +284,9 @@ class RefineThreadChooser {
 };
 
 /// runInnerActive() on gathered buffers: the same steps on contiguous
-/// arrays, vectorised, on up to params.num_threads threads.
-void runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
+/// arrays, vectorised, on up to params.num_threads threads. Returns false
+/// when params.cancel stopped it (as runInnerActive()).
+bool runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
                         ActiveBuffers& buffers, int iterations);
 
 /// Angle between a warm start's normal and an input's window mean, beyond
@@ -307,10 +321,15 @@ double energyActive(const PreparedLevel& level, double huber_eps,
 
 /// Runs `iterations` Chambolle-Pock iterations on the tangent plane at n0.
 /// Reference backend: one plain function per step of the maths.
-void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+/// Both return false when params.cancel stopped them before the last
+/// iteration ended: read before each iteration (reference) or each row
+/// (fast; its threads then leave their sweeps where they are). n and nbar
+/// are then those of an unfinished iteration, to be dropped; the duals are
+/// each the result of a whole step (finite, feasible), n0 is untouched.
+bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& state, int iterations);
 /// Fast backend: fused per-pixel passes, multithreaded.
-void runInnerFast(const PreparedLevel& level, const InnerParams& params,
+bool runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations);
 
 /// huber_eps(z) = z^2 / (2 eps) below eps, z - eps / 2 above (eps = 0: z).
@@ -430,10 +449,13 @@ void computeEdgeWeightsInto(const ColorImage& image,
 /// terms' Huber thresholds and the edge weights (weakened inside holes).
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
-/// The same into reused buffers, with `threads` threads.
-void prepareFinestInto(const FusionProblem& problem,
+/// The same into reused buffers, with `threads` threads. Returns false when
+/// a set `cancel` (read between its steps) stopped it: the level is then
+/// incomplete (not to be solved on).
+bool prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
-                       EdgeWeightScratch& scratch, int threads);
+                       EdgeWeightScratch& scratch, int threads,
+                       const std::atomic<bool>* cancel = nullptr);
 
 /// Multiplies the edge weights of the links between two pixels that no input
 /// observes by `factor` (SolverSettings::hole_link_weight).
