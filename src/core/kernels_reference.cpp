@@ -16,19 +16,16 @@ void IterationState::resize(int width, int height, int num_inputs) {
   for (PlanarImage& q_l : q) q_l.resizeKeepingCapacity(width, height, 3);
 }
 
-void IterationState::fit(int width, int height, int num_inputs, int threads) {
-  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v}) {
-    image->resize(width, height, 3);
-  }
-  q.resize(num_inputs);
-  for (PlanarImage& q_l : q) q_l.resize(width, height, 3);
-  // The reference backend's scratch (sized by runInnerReference() when it
-  // runs) and the fast backend's rows (three per thread, grown by
-  // runInnerFast()): released when sized for a much larger image.
+void IterationState::fit(int width, int height, int threads) {
+  // Release only (allocating here would be memory the levels may not
+  // need, and time a cancelled solve could not give back).
   const std::size_t values = static_cast<std::size_t>(3) * width * height;
-  for (PlanarImage* image : {&grad_h, &grad_v, &div, &q_sum}) {
-    if (values < image->bytesHeld() / sizeof(float) / 4) *image = PlanarImage();
+  for (PlanarImage* image :
+       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
+    releaseIfOversized(*image, values);
   }
+  for (PlanarImage& q_l : q) releaseIfOversized(q_l, values);
+  // The fast backend's rows: three per thread.
   releaseIfOversized(row_scratch,
                      static_cast<std::size_t>(3) * width * threads);
 }

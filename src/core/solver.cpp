@@ -895,7 +895,7 @@ class SolverImpl {
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
     report.filled_pixels = W * H - finest.valid_pixels;
-    fitBuffers(W, H, L);
+    fitBuffers(W, H);
     if (cancelled()) {
       finishCancelledBeforeStart(report, start);
       return;
@@ -1106,18 +1106,14 @@ class SolverImpl {
 
   /// Gives back the memory of the buffers that every level of a solve
   /// shares, and of those of the warm start, when they were sized for a much
-  /// larger image than this one (W x H, L inputs): more than 4 times what it
+  /// larger image than this one (W x H): more than 4 times what it
   /// needs (PlanarImage::resize()'s rule; the same size never reallocates).
   /// The finest level's own buffers follow the rule as they are prepared.
-  void fitBuffers(int W, int H, int L) {
+  void fitBuffers(int W, int H) {
     const std::size_t N = static_cast<std::size_t>(W) * H;
-    state_.fit(W, H, L, threads_);
-    if (3 * N < candidate_.bytesHeld() / sizeof(float) / 4) {
-      candidate_ = PlanarImage();
-    }
-    if (3 * N < coarse_result_.bytesHeld() / sizeof(float) / 4) {
-      coarse_result_ = PlanarImage();
-    }
+    state_.fit(W, H, threads_);
+    internal::releaseIfOversized(candidate_, 3 * N);
+    internal::releaseIfOversized(coarse_result_, 3 * N);
     for (std::vector<float>* v :
          {&edge_scratch_.mag_h, &edge_scratch_.mag_v, &edge_scratch_.plane,
           &edge_scratch_.blurred, &edge_scratch_.blur}) {

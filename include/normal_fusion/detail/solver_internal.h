@@ -28,6 +28,11 @@ void releaseIfOversized(std::vector<T, A>& v, std::size_t values) {
   if (values < v.capacity() / 4) std::vector<T, A>().swap(v);
 }
 
+/// The same for an image (`values`: floats, all planes).
+inline void releaseIfOversized(PlanarImage& image, std::size_t values) {
+  if (values < image.bytesHeld() / sizeof(float) / 4) image = PlanarImage();
+}
+
 /// A problem after input preparation, at one pyramid level: everything the
 /// inner iterations read and never write.
 struct PreparedLevel {
@@ -110,10 +115,10 @@ struct IterationState {
   /// Sizes every buffer for one level of a solve, keeping the capacity (the
   /// pyramid's levels reuse the finest level's buffers).
   void resize(int width, int height, int num_inputs);
-  /// Sizes them for the finest level of a solve (PlanarImage::resize():
-  /// buffers sized for a much larger image give their memory back, and so
-  /// does the fast backend's row scratch, sized for `threads` threads).
-  void fit(int width, int height, int num_inputs, int threads);
+  /// Before the levels of a solve whose finest level is W x H with
+  /// `threads` threads: releases the buffers sized for a much larger image
+  /// (releaseIfOversized()); the levels then size what they use.
+  void fit(int width, int height, int threads);
   /// Bytes of memory its buffers hold.
   std::size_t bytesHeld() const;
 };
