@@ -487,11 +487,14 @@ bool runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
   const int threads = P >= kMinActivePerThread ? prm.num_threads : 1;
   auto update = prm.soft_visibility ? primalUpdateIndexed<true>
                                     : primalUpdateIndexed<false>;
-  // The stop request, read by thread 0 before each iteration's last barrier
-  // and acted on by every thread after it (the same decision for all: none
-  // is left at a barrier). Written again only after the next iteration's
-  // first barrier, when every thread has read it.
-  bool stop = false;
+  // The stop request, read before the first iteration, then by thread 0
+  // before each iteration's last barrier and acted on by every thread after
+  // it (the same decision for all: none is left at a barrier). Written again
+  // only after the next iteration's first barrier, when every thread has
+  // read it.
+  if (iterations <= 0) return true;
+  bool stop = stopRequested(prm.cancel);
+  if (stop) return false;
   int done = iterations;
 #pragma omp parallel num_threads(threads)
   {

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <thread>
 
+#include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
 #include "test_util.h"
 
@@ -100,12 +101,14 @@ const char* stage(const SolveReport& r) {
   return "before the iterations";
 }
 
-/// Cold solves that would take many seconds (the default settings: up to
-/// 1000 whole-image iterations), cancelled at several points: each returns
-/// within the deadline of the request, marked cancelled, with a usable
-/// state. Fast backend at 1920x1440; the reference backend, about 30 times
-/// slower per iteration (0.29 s at 1920x1440 on one thread, so one
-/// iteration would nearly fill the deadline), at 960x720.
+/// Cold solves that would take many seconds (the default settings, with
+/// outer steps of 200 inner iterations: about 2 s each at 1920x1440 on two
+/// threads, so the deadline holds only if the iterations themselves stop),
+/// cancelled at several points: each returns within the deadline of the
+/// request, marked cancelled, with a usable state. Fast backend at
+/// 1920x1440; the reference backend, about 30 times slower per iteration
+/// (0.29 s at 1920x1440 on one thread, so one iteration would nearly fill
+/// the deadline), at 960x720.
 TEST(Cancel, ColdSolveEndsPromptlyOnRequest) {
   for (SolverBackend backend :
        {SolverBackend::kFast, SolverBackend::kReference}) {
@@ -117,6 +120,8 @@ TEST(Cancel, ColdSolveEndsPromptlyOnRequest) {
       settings.backend = backend;
       settings.num_threads = 2;
       settings.pyramid_levels = pyramid;  // 0: automatic (5 levels here)
+      settings.inner_iterations = 200;
+      settings.max_total_inner_iterations = 4000;
       Solver solver(settings);
       for (double delay : {0.02, 0.2, 0.6}) {
         SolverState state;
@@ -195,6 +200,130 @@ TEST(Cancel, LocalRefinementEndsPromptlyOnRequest) {
     EXPECT_LT(report.refine_iterations, settings.warm_refine_iterations);
     EXPECT_LT(latency, kDeadlineSeconds) << toString(backend);
     expectUsable(state, problem);
+  }
+}
+
+/// The four iteration kernels (fast and reference, whole image and local
+/// refinement) on their own, at 640x480 with two threads: with the request
+/// clear they compute the same bits as without one; set before the call,
+/// they return false at once with nothing changed; set by another thread
+/// during a run of about 3 s worth of iterations, they return false within
+/// the deadline of the request.
+TEST(Cancel, KernelsStopOnTheRequest) {
+  const FusionProblem problem = cylinderWithHole(640, 480);
+  const int W = 640, H = 480, L = 2;
+  const internal::PreparedLevel level =
+      internal::prepareFinest(problem, SolverSettings());
+  internal::InnerParams params;
+  params.tau = 1.0f / (4 + L);
+  params.sigma = 0.5f;
+  params.sigma_data = 1.0f;
+  params.soft_visibility = true;
+  params.num_threads = 2;
+  // The state: n0 = n = nbar = the first input where it has one, else
+  // facing the camera; duals 0. The local refinement: the left half.
+  internal::IterationState start;
+  start.resize(W, H, L);
+  for (std::size_t i = 0; i < start.n0.pixelCount(); ++i) {
+    const bool known = level.data_weight[0].plane(0)[i] > 0.0f;
+    for (int c = 0; c < 3; ++c) {
+      start.n0.plane(c)[i] =
+          known ? level.data[0].plane(c)[i] : (c == 2 ? -1.0f : 0.0f);
+    }
+  }
+  start.n = start.nbar = start.n0;
+  for (PlanarImage* dual : {&start.p_h, &start.p_v, &start.q[0], &start.q[1]}) {
+    dual->fill(0.0f);
+  }
+  std::vector<unsigned char> seed(static_cast<std::size_t>(W) * H, 0);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W / 2; ++x) seed[y * W + x] = 1;
+  }
+  internal::ActiveSet active;
+  active.build(seed, W, H, 1);
+
+  enum Kernel { kFast, kReference, kActiveReference, kActiveFast };
+  const char* names[] = {"runInnerFast", "runInnerReference", "runInnerActive",
+                         "runInnerActiveFast"};
+  for (Kernel kernel : {kFast, kReference, kActiveReference, kActiveFast}) {
+    // Runs `iterations` of the kernel on a copy of the start with the
+    // given request flag (null: none); its n (gathered back for the fast
+    // refinement) and p_h come out.
+    auto run = [&](int iterations, const std::atomic<bool>* cancel,
+                   internal::IterationState& s) {
+      s.n0 = start.n0;
+      s.n = start.n;
+      s.nbar = start.nbar;
+      s.p_h = start.p_h;
+      s.p_v = start.p_v;
+      s.q = start.q;
+      internal::InnerParams p = params;
+      p.cancel = cancel;
+      bool ran = false;
+      switch (kernel) {
+        case kFast:
+          ran = internal::runInnerFast(level, p, s, iterations);
+          break;
+        case kReference:
+          ran = internal::runInnerReference(level, p, s, iterations);
+          break;
+        case kActiveReference:
+          ran = internal::runInnerActive(level, p, s, active, iterations);
+          break;
+        case kActiveFast: {
+          internal::ActiveBuffers b;
+          b.gather(level, s, active, 2);
+          ran = internal::runInnerActiveFast(level, p, b, iterations);
+          b.scatter(s, 2);
+          for (int k = 0; k < b.num_active; ++k) {
+            for (int c = 0; c < 3; ++c)
+              s.n.plane(c)[b.node_pixel[k]] = b.n[c][k];
+          }
+          break;
+        }
+      }
+      return ran;
+    };
+    auto same = [](const PlanarImage& a, const PlanarImage& b) {
+      return std::memcmp(a.data(), b.data(),
+                         a.pixelCount() * a.channels() * sizeof(float)) == 0;
+    };
+    // Clear: the same bits as without a flag (and the time per iteration).
+    std::atomic<bool> flag{false};
+    internal::IterationState plain, checked;
+    ASSERT_TRUE(run(12, nullptr, plain));
+    const Clock::time_point before = Clock::now();
+    ASSERT_TRUE(run(12, &flag, checked)) << names[kernel];
+    const double per_iteration = secondsBetween(before, Clock::now()) / 12;
+    EXPECT_TRUE(same(plain.n, checked.n)) << names[kernel];
+    EXPECT_TRUE(same(plain.p_h, checked.p_h)) << names[kernel];
+    // Set before: nothing runs.
+    flag.store(true);
+    internal::IterationState stopped;
+    EXPECT_FALSE(run(12, &flag, stopped)) << names[kernel];
+    EXPECT_TRUE(same(stopped.n, start.n)) << names[kernel];
+    EXPECT_TRUE(same(stopped.p_h, start.p_h)) << names[kernel];
+    // Set during a long run (about 3 s of iterations).
+    flag.store(false);
+    const int iterations =
+        static_cast<int>(std::ceil(3.0 / std::max(per_iteration, 1e-5)));
+    Clock::time_point requested;
+    std::thread canceller([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      requested = Clock::now();
+      flag.store(true);
+    });
+    internal::IterationState interrupted;
+    const bool ran = run(iterations, &flag, interrupted);
+    const Clock::time_point returned = Clock::now();
+    canceller.join();
+    const double latency = secondsBetween(requested, returned);
+    std::printf(
+        "%s: %.2f ms per iteration, %d iterations asked, stopped %.1f ms "
+        "after the request\n",
+        names[kernel], 1e3 * per_iteration, iterations, 1e3 * latency);
+    EXPECT_FALSE(ran) << names[kernel];
+    EXPECT_LT(latency, kDeadlineSeconds) << names[kernel];
   }
 }
 
