@@ -94,7 +94,7 @@ NF_MULTIVERSION void convertInputRow(
     const bool usable = (s > 1e-12f) & (s < 1e30f);
     // Clamped to [0, 1]; NaN and infinities count as 0.
     float conf = kHasConfidence ? confidence[x] : 1.0f;
-    conf = (conf >= 0.0f) & (conf <= kFloatMax) ? std::min(conf, 1.0f) : 0.0f;
+    conf = ((conf >= 0.0f) & (conf <= kFloatMax)) ? std::min(conf, 1.0f) : 0.0f;
     const float ox = M[0] * ix + M[1] * iy + M[2] * iz;
     const float oy = M[3] * ix + M[4] * iy + M[5] * iz;
     const float oz = M[6] * ix + M[7] * iy + M[8] * iz;
@@ -326,7 +326,7 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
     // window / count where the density correction applies (c > 0,
     // 0 < n < window), else 1.
     const float applies =
-        (c[x] > 0.0f) & (n > 0.0f) & (n < window) ? 1.0f : 0.0f;
+        ((c[x] > 0.0f) & (n > 0.0f) & (n < window)) ? 1.0f : 0.0f;
     ratio[x] = 1.0f + applies * (window / std::max(n, 1.0f) - 1.0f);
   }
 }
