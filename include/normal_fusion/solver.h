@@ -191,7 +191,7 @@ void validateProblem(const FusionProblem& problem);
 PlanarImage computeEdgeWeights(const ColorImage& image,
                                const EdgeWeightSettings& settings);
 
-/// The energy E(n) of ALGORITHM.md for the given normals (need not be unit),
+/// The energy E(n) of docs/algorithm.md for the given normals (need not be unit),
 /// with the problem's inputs prepared as the solver prepares them (orientation,
 /// validity, confidence, hard visibility).
 double computeEnergy(const FusionProblem& problem,

@@ -484,7 +484,7 @@ double energyFast(const PreparedLevel& level, double huber_eps,
                   DataPenalty penalty, const PlanarImage& normals,
                   int num_threads);
 
-/// E(n) of ALGORITHM.md on a prepared level (double accumulation).
+/// E(n) of docs/algorithm.md on a prepared level (double accumulation).
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
               const PlanarImage& normals, int num_threads);
 
