@@ -148,7 +148,8 @@ int main(int argc, char** argv) {
   auto n1_pub = nh.advertise<sensor_msgs::Image>("/normals_1", 2);
 
   std::mutex mutex;
-  std::vector<double> latency, frame_time, queue_time, solve_time, receive_s;
+  std::vector<double> latency, frame_time, queue_time, solve_time, receive_s,
+      reserve;
   std::uint64_t dropped = 0, skipped = 0, warm = 0;
   const ros::WallTime start = ros::WallTime::now();
   ros::Subscriber stats_sub = nh.subscribe<nf::FusionStats>(
@@ -159,6 +160,7 @@ int main(int argc, char** argv) {
         frame_time.push_back(m->frame_time);
         queue_time.push_back(m->queue_time);
         solve_time.push_back(m->solve_time);
+        reserve.push_back(m->budget_reserve);
         dropped = m->frames_dropped;
         skipped = m->frames_skipped;
         warm += m->warm_started ? 1 : 0;
@@ -287,10 +289,31 @@ int main(int argc, char** argv) {
   std::printf("| solve time p50 / p95 | %.1f / %.1f ms |\n",
               ms(percentile(solve_time, 0.5)),
               ms(percentile(solve_time, 0.95)));
+  std::printf("| overrun reserve p50 / max | %.1f / %.1f ms |\n",
+              ms(percentile(reserve, 0.5)), ms(percentile(reserve, 1.0)));
   std::printf(
       "| resident memory: start / end, slope after %.0f s | %.1f / %.1f MiB, "
       "%.2f MiB/min |\n",
       o.warmup, memory_mib.empty() ? 0.0 : memory_mib.front(),
       memory_mib.empty() ? 0.0 : memory_mib.back(), slope(t_after, m_after));
+  // The shape of the curve: a slope that falls towards 0 is the allocator
+  // settling, one that stays is a leak.
+  std::vector<double> t_late, m_late;
+  for (std::size_t i = 0; i < t_after.size(); ++i) {
+    if (t_after[i] * 60.0 >= 0.5 * seconds) {
+      t_late.push_back(t_after[i]);
+      m_late.push_back(m_after[i]);
+    }
+  }
+  std::printf("| resident memory slope, second half | %.2f MiB/min |\n",
+              slope(t_late, m_late));
+  std::printf("| resident memory each minute | ");
+  for (std::size_t i = 0; i < memory_t.size(); ++i) {
+    if (i == 0 || static_cast<int>(memory_t[i] / 60.0) !=
+                      static_cast<int>(memory_t[i - 1] / 60.0)) {
+      std::printf("%.0f ", memory_mib[i]);
+    }
+  }
+  std::printf("MiB |\n");
   return 0;
 }

@@ -441,11 +441,13 @@ void FusionPipeline::process(const InputSet& set,
 
   try {
     // time_budget_ms covers the whole frame: conversion, warp, solve and the
-    // outputs' encoding, whose time (as the last frames took) is set aside
-    // by starting the budget that much earlier.
+    // outputs' encoding. The encoding's time (as the last frames took) and
+    // the overrun reserve are set aside by starting the budget that much
+    // earlier.
     const auto reserve =
         std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-            std::chrono::duration<double>(encode_estimate_s_));
+            std::chrono::duration<double>(encode_estimate_s_ +
+                                          overrun_reserve_s_));
     solver_.setBudgetStart(started - reserve);
     solver_.solve(problem_, state_, warm || stream_start, report_);
     if (report_.cancelled) throw Cancelled(topics_.image + ": solve cancelled");
@@ -535,7 +537,21 @@ void FusionPipeline::process(const InputSet& set,
                                                     0.2 * stats->encode_time;
   stats->frame_time = secondsSince(started);
   stats->latency = stats->frame_time;
+  stats->budget_reserve = overrun_reserve_s_;
   previous_seconds_ = stats->frame_time;
+  // The overrun reserve tracks the kBudgetQuantile quantile of the frames'
+  // overruns (a stochastic quantile estimate): up by q steps after a frame
+  // over the budget, down by 1 - q steps after one within, so that about
+  // that share of frames keeps the budget whatever the machine's load.
+  const double budget_s = 1e-3 * solver_.settings().time_budget_ms;
+  if (budget_s > 0.0 && !report_.cold_start_budget_used) {
+    constexpr double kBudgetQuantile = 0.98, kStepS = 1e-3;
+    overrun_reserve_s_ += stats->frame_time > budget_s
+                              ? kStepS * kBudgetQuantile
+                              : -kStepS * (1.0 - kBudgetQuantile);
+    overrun_reserve_s_ =
+        std::min(std::max(overrun_reserve_s_, 0.0), 0.5 * budget_s);
+  }
   output->stats = stats;
 }
 

@@ -905,6 +905,47 @@ TEST(Pipeline, WarmStartNeedsASmallForwardGapAndTheSameK) {
 /// cold_start_budget_ms (none: the iteration caps) and says so in a note;
 /// the warm frames in between keep the frame budget. With warm starts off
 /// every frame is a one-shot cold start under the frame budget.
+/// What the frame budget sets aside: the encoding's time, and a reserve that
+/// grows after frames over the budget and shrinks after frames within it.
+TEST(Pipeline, TheBudgetReservesTheEncodingAndTracksOverruns) {
+  SceneFixture fixture;
+  fixture.settings.solver.time_budget_ms = 1e-3;  // every frame overruns it
+  fixture.settings.solver.pyramid_levels = 1;
+  const test::NoisyFrame f =
+      test::noisyFrame(synthetic::renderScene(0, 64, 48), 5);
+  FusionPipeline pipeline(fixture.settings, TopicNames::defaults(2));
+  PipelineOutput out;
+  double stamp = 1.0;
+  std::vector<double> reserves;
+  for (int k = 0; k < 4; ++k) {
+    pipeline.process(fixture.setFor(f, stamp += 0.03), nullptr, false, &out);
+    EXPECT_GT(out.stats->encode_time, 0.0);
+    EXPECT_GE(out.stats->frame_time,
+              out.stats->solve_time + out.stats->encode_time);
+    reserves.push_back(out.stats->budget_reserve);
+  }
+  // Each frame reports the reserve it was given. The first frame (the
+  // stream's cold start) does not count; a warm frame over the budget adds
+  // 0.98 ms, up to half the budget.
+  EXPECT_EQ(reserves[0], 0.0);
+  EXPECT_EQ(reserves[1], 0.0);
+  EXPECT_EQ(reserves[2], 0.5e-6);
+  EXPECT_EQ(reserves[3], 0.5e-6);
+  // A generous budget: every frame within it, the reserve shrinks by 0.02 ms
+  // a frame, down to 0.
+  NodeSettings generous = fixture.settings;
+  generous.solver.time_budget_ms = 1000.0;
+  pipeline.setSettings(generous);
+  std::vector<double> after;
+  for (int k = 0; k < 3; ++k) {
+    pipeline.process(fixture.setFor(f, stamp += 0.03), nullptr, false, &out);
+    after.push_back(out.stats->budget_reserve);
+  }
+  EXPECT_EQ(after[0], 0.5e-6);
+  EXPECT_EQ(after[1], 0.0);
+  EXPECT_EQ(after[2], 0.0);
+}
+
 TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
   SceneFixture fixture;
   fixture.settings.solver.time_budget_ms = 1e-3;

@@ -166,6 +166,9 @@ class FusionPipeline {
   std::uint64_t frames_processed_ = 0;
   /// Seconds the outputs' encoding takes, reserved inside the frame budget.
   double encode_estimate_s_ = 0.0;
+  /// Seconds reserved for what the solve's own deadline cannot foresee (a
+  /// loaded machine): the 98th percentile of the frames' overruns.
+  double overrun_reserve_s_ = 0.0;
 };
 
 }  // namespace node
