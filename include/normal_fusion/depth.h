@@ -47,7 +47,6 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
-#include <vector>
 
 #include "normal_fusion/types.h"
 
@@ -154,7 +153,6 @@ class DepthNormalEstimator {
   PlanarImage z_pad_;  ///< depth padded by pad_ on each side (NaN)
   PlanarImage w_pad_;  ///< 1 / z, padded alike
   PlanarImage edge_;   ///< d_edge per pixel, capped
-  std::vector<PlanarImage> scratch_;  ///< per-thread row sums
 };
 
 /// One-shot form of DepthNormalEstimator::compute.

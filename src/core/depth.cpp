@@ -2,8 +2,6 @@
 // inverse depth (see depth.h for the equations).
 #include "normal_fusion/depth.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -75,6 +73,20 @@ inline float angularVariance(const Camera& c, float u, float v, float s00,
   return std::max(trace - quad, 0.0f);
 }
 
+/// exp(-q) for q >= 0 (NaN or q < 0 read as 0, q > 64 gives 0) in plain
+/// arithmetic that vectorizes: e^-q = (e^(-q / 256))^256, the inner term by
+/// its Taylor series to degree 5 (|q / 256| <= 1 / 4), then eight squarings
+/// (relative error below 2e-5).
+inline float expNeg(float q) {
+  const float t = (q > 0.0f ? (q < 64.0f ? q : 64.0f) : 0.0f) * -(1.0f / 256);
+  float p =
+      1.0f +
+      t * (1.0f + t * (0.5f + t * (1.0f / 6.0f +
+                                   t * (1.0f / 24.0f + t * (1.0f / 120.0f)))));
+  for (int k = 0; k < 8; ++k) p *= p;
+  return q < 64.0f ? p : 0.0f;
+}
+
 /// The confidence of depth.h from sigma_n^2 / (a^2 d^2), the plane distance
 /// d, the normal n, the ray r and d_edge; 0 where the normal is NaN.
 struct ConfidenceConstants {
@@ -92,8 +104,9 @@ inline float confidenceAt(const ConfidenceConstants& k, float variance_unit,
   const float cos_view = std::min(std::abs(n_dot_r) / std::sqrt(r_norm2), 1.0f);
   const float edge =
       k.edge_enabled ? std::min(edge_px * k.inv_edge, 1.0f) : 1.0f;
-  const float c = std::exp(-q) * cos_view * edge;
-  return c >= 0.0f ? c : 0.0f;  // NaN (unknown normal) -> 0
+  const float c = expNeg(q) * cos_view * edge;
+  // NaN (unknown normal or distance) -> 0.
+  return (q == q && c >= 0.0f) ? c : 0.0f;
 }
 
 /// One row of central differences (padded depth, pad 1): normals and, when
@@ -112,6 +125,7 @@ void centralDifferenceRow(int width, int y, const Camera& cam,
               yr_down = cam.yr(v + 1.0f);
   // S of the four neighbours (+-1, 0), (0, +-1): diag(1/2, 1/2, 1/4).
   constexpr float s00 = 0.5f, s11 = 0.5f, s22 = 0.25f;
+  const bool with_conf = conf != nullptr;
   for (int x = 0; x < width; ++x) {
     // Padded index x + 1 is pixel x.
     const float u = static_cast<float>(x);
@@ -141,113 +155,127 @@ void centralDifferenceRow(int width, int y, const Camera& cam,
     nx[x] = cx;
     ny[x] = cy;
     nz[x] = cz;
-    if (conf != nullptr) {
-      const float n_dot_r = cx * rx + cy * yr + cz;
-      const float d = -zc * n_dot_r;  // n . P_c = -d
-      const float var = angularVariance(cam, u, v, s00, 0.0f, 0.0f, s11, 0.0f,
-                                        s22, cx, cy, cz);
-      conf[x] = confidenceAt(k, var, d, n_dot_r, rx * rx + yr * yr + 1.0f,
-                             edge != nullptr ? edge[x] : 1.0f);
-    }
   }
-}
-
-/// The row sums of the plane fit: mask m, m du, m dv, m du^2, m du dv,
-/// m dv^2, and of w - w_c: sum, du-, dv-weighted.
-enum Sum { kN, kU, kV, kUU, kUV, kVV, kW, kUW, kVW, kNumSums };
-
-/// Adds neighbour (du, dv) of every pixel of one row to the sums.
-NF_MULTIVERSION
-void accumulateNeighbour(int width, float du, float dv, float ratio,
-                         float noise_k, const float* __restrict z_centre,
-                         const float* __restrict w_centre,
-                         const float* __restrict z_neighbour,
-                         const float* __restrict w_neighbour,
-                         float* __restrict sums, int stride) {
-  float* __restrict sn = sums;
-  float* __restrict su = sums + stride;
-  float* __restrict sv = sums + 2 * stride;
-  float* __restrict suu = sums + 3 * stride;
-  float* __restrict suv = sums + 4 * stride;
-  float* __restrict svv = sums + 5 * stride;
-  float* __restrict sw = sums + 6 * stride;
-  float* __restrict suw = sums + 7 * stride;
-  float* __restrict svw = sums + 8 * stride;
-  for (int x = 0; x < width; ++x) {
-    const float zc = z_centre[x];
-    // |z - z_c| <= tau(z_c); false for a neighbour (or centre) without depth.
-    const float tau = zc * (ratio + noise_k * zc);
-    const bool in = std::abs(z_neighbour[x] - zc) <= tau;
-    const float m = in ? 1.0f : 0.0f;
-    const float dw = in ? w_neighbour[x] - w_centre[x] : 0.0f;
-    sn[x] += m;
-    su[x] += m * du;
-    sv[x] += m * dv;
-    suu[x] += m * (du * du);
-    suv[x] += m * (du * dv);
-    svv[x] += m * (dv * dv);
-    sw[x] += dw;
-    suw[x] += du * dw;
-    svw[x] += dv * dw;
-  }
-}
-
-/// Solves the row's fits: A du + B dv + C' = w - w_c in least squares, then
-/// g = K^T (A, B, C - A u - B v), n = -g / |g|, and the confidence.
-NF_MULTIVERSION
-void solvePlaneRow(int width, int y, const Camera& cam,
-                   const float* __restrict sums, int stride,
-                   const float* __restrict w_centre,
-                   const float* __restrict edge, const ConfidenceConstants& k,
-                   float* __restrict nx, float* __restrict ny,
-                   float* __restrict nz, float* __restrict conf) {
-  const float v = static_cast<float>(y);
-  const float yr = cam.yr(v);
+  if (!with_conf) return;
+  // The confidence in a loop of its own (it vectorizes apart).
   for (int x = 0; x < width; ++x) {
     const float u = static_cast<float>(x);
-    const double n = sums[x], su = sums[stride + x], sv = sums[2 * stride + x];
-    const double suu = sums[3 * stride + x], suv = sums[4 * stride + x];
-    const double svv = sums[5 * stride + x];
-    const double sw = sums[6 * stride + x], suw = sums[7 * stride + x];
-    const double svw = sums[8 * stride + x];
-    // Adjugate of M = [suu suv su; suv svv sv; su sv n].
-    const double c00 = svv * n - sv * sv, c01 = su * sv - suv * n;
-    const double c02 = suv * sv - svv * su, c11 = suu * n - su * su;
-    const double c12 = suv * su - suu * sv, c22 = suu * svv - suv * suv;
-    const double det = suu * c00 + suv * c01 + su * c02;
-    // det(M) is a sum of squared doubled triangle areas of lattice points:
-    // >= 1 unless the points used are collinear.
-    const bool solvable = det > 0.5;
-    const double inv_det = solvable ? 1.0 / det : 0.0;
-    const double A = (c00 * suw + c01 * svw + c02 * sw) * inv_det;
-    const double B = (c01 * suw + c11 * svw + c12 * sw) * inv_det;
-    const double C = (c02 * suw + c12 * svw + c22 * sw) * inv_det + w_centre[x];
-    // g = K^T (A, B, C - A u - B v) = (fx A, s A + fy B, (cx - u) A +
-    // (cy - v) B + C).
-    const double gx = cam.fx * A;
-    const double gy = cam.s * A + cam.fy * B;
-    const double gz = (cam.cx - u) * A + (cam.cy - v) * B + C;
-    const double glen = std::sqrt(gx * gx + gy * gy + gz * gz);
-    // C is the fitted 1 / z at the pixel: > 0 for a plane in front.
-    const bool ok = solvable && C > 0.0 && glen > 0.0;
-    const double inv_glen = ok ? -1.0 / glen : 0.0;
-    const float ox = ok ? static_cast<float>(gx * inv_glen) : kNaN;
-    const float oy = ok ? static_cast<float>(gy * inv_glen) : kNaN;
-    const float oz = ok ? static_cast<float>(gz * inv_glen) : kNaN;
-    nx[x] = ox;
-    ny[x] = oy;
-    nz[x] = oz;
-    if (conf != nullptr) {
+    const float rx = cam.xr(u, yr);
+    const float n_dot_r = nx[x] * rx + ny[x] * yr + nz[x];
+    const float d = -z_mid[x + 1] * n_dot_r;  // n . P_c = -d
+    const float var = angularVariance(cam, u, v, s00, 0.0f, 0.0f, s11, 0.0f,
+                                      s22, nx[x], ny[x], nz[x]);
+    conf[x] =
+        confidenceAt(k, var, d, n_dot_r, rx * rx + yr * yr + 1.0f, edge[x]);
+  }
+}
+
+/// Pixels per block of the plane fit: the window sums of a block stay in
+/// registers while the window's neighbours are added.
+constexpr int kBlock = 8;
+
+/// One row of plane fits. z, w: the padded depth and inverse depth at the
+/// row's first pixel (rows `stride` apart, at least kBlock - 1 readable
+/// columns after the row's last pixel). For each pixel: the least squares
+/// A du + B dv + C' = w - w_c over the neighbours with |z - z_c| <= tau(z_c),
+/// then g = K^T (A, B, C - A u - B v), n = -g / |g|, and the confidence.
+NF_MULTIVERSION
+void planeFitRow(int width, int y, int R, std::ptrdiff_t stride,
+                 const Camera& cam, float ratio, float noise_k,
+                 const float* __restrict z, const float* __restrict w,
+                 const float* __restrict edge, const ConfidenceConstants& k,
+                 float* __restrict nx, float* __restrict ny,
+                 float* __restrict nz, float* __restrict conf) {
+  const float v = static_cast<float>(y);
+  const float yr = cam.yr(v);
+  const bool with_conf = conf != nullptr;
+  for (int x0 = 0; x0 < width; x0 += kBlock) {
+    float zc[kBlock], wc[kBlock], tau[kBlock];
+    for (int j = 0; j < kBlock; ++j) {
+      zc[j] = z[x0 + j];
+      wc[j] = w[x0 + j];
+      tau[j] = zc[j] * (ratio + noise_k * zc[j]);
+    }
+    // The sums of the normal equations: mask m and its du, dv moments, and
+    // of w - w_c.
+    float sn[kBlock] = {}, su[kBlock] = {}, sv[kBlock] = {};
+    float suu[kBlock] = {}, suv[kBlock] = {}, svv[kBlock] = {};
+    float sw[kBlock] = {}, suw[kBlock] = {}, svw[kBlock] = {};
+    for (int dv = -R; dv <= R; ++dv) {
+      const float fv = static_cast<float>(dv);
+      for (int du = -R; du <= R; ++du) {
+        const float fu = static_cast<float>(du);
+        const float* zn = z + dv * stride + du + x0;
+        const float* wn = w + dv * stride + du + x0;
+        for (int j = 0; j < kBlock; ++j) {
+          // |z - z_c| <= tau(z_c); false without depth at either.
+          const bool in = std::abs(zn[j] - zc[j]) <= tau[j];
+          const float m = in ? 1.0f : 0.0f;
+          const float dw = in ? wn[j] - wc[j] : 0.0f;
+          sn[j] += m;
+          su[j] += m * fu;
+          sv[j] += m * fv;
+          suu[j] += m * (fu * fu);
+          suv[j] += m * (fu * fv);
+          svv[j] += m * (fv * fv);
+          sw[j] += dw;
+          suw[j] += fu * dw;
+          svw[j] += fv * dw;
+        }
+      }
+    }
+    const int count = std::min(kBlock, width - x0);
+    float ed[kBlock];
+    for (int j = 0; j < kBlock; ++j) {
+      ed[j] = j < count ? edge[x0 + j] : 1.0f;
+    }
+    // Solved for the whole block (lanes past the row's end are dropped),
+    // confidence included.
+    float ox[kBlock], oy[kBlock], oz[kBlock], oc[kBlock];
+    for (int j = 0; j < kBlock; ++j) {
+      const float u = static_cast<float>(x0 + j);
+      // Adjugate of M = [suu suv su; suv svv sv; su sv n] (integer sums).
+      const float n = sn[j], a_u = su[j], a_v = sv[j];
+      const float a_uu = suu[j], a_uv = suv[j], a_vv = svv[j];
+      const float c00 = a_vv * n - a_v * a_v, c01 = a_u * a_v - a_uv * n;
+      const float c02 = a_uv * a_v - a_vv * a_u, c11 = a_uu * n - a_u * a_u;
+      const float c12 = a_uv * a_u - a_uu * a_v;
+      const float c22 = a_uu * a_vv - a_uv * a_uv;
+      const float det = a_uu * c00 + a_uv * c01 + a_u * c02;
+      // det(M) is a sum of squared doubled triangle areas of lattice
+      // points: >= 1 unless the points used are collinear (the second term
+      // bounds the rounding of large sums).
+      const bool solvable = det > 0.5f + 1e-5f * a_uu * c00;
+      const float inv_det = solvable ? 1.0f / det : 0.0f;
+      const float A = (c00 * suw[j] + c01 * svw[j] + c02 * sw[j]) * inv_det;
+      const float B = (c01 * suw[j] + c11 * svw[j] + c12 * sw[j]) * inv_det;
+      const float C =
+          (c02 * suw[j] + c12 * svw[j] + c22 * sw[j]) * inv_det + wc[j];
+      // g = K^T (A, B, C - A u - B v).
+      const float gx = cam.fx * A;
+      const float gy = cam.s * A + cam.fy * B;
+      const float gz = (cam.cx - u) * A + (cam.cy - v) * B + C;
+      const float glen2 = gx * gx + gy * gy + gz * gz;
+      // C is the fitted 1 / z at the pixel: > 0 for a plane in front.
+      const bool ok = solvable && C > 0.0f && glen2 > 0.0f;
+      const float inv_glen = ok ? 1.0f / std::sqrt(glen2) : kNaN;
+      ox[j] = -gx * inv_glen;
+      oy[j] = -gy * inv_glen;
+      oz[j] = -gz * inv_glen;
       const float rx = cam.xr(u, yr);
-      const float n_dot_r = ox * rx + oy * yr + oz;
-      const float d = ok ? static_cast<float>(1.0 / glen) : kNaN;
+      const float n_dot_r = ox[j] * rx + oy[j] * yr + oz[j];
       const float var = angularVariance(
-          cam, u, v, static_cast<float>(c00 * inv_det),
-          static_cast<float>(c01 * inv_det), static_cast<float>(c02 * inv_det),
-          static_cast<float>(c11 * inv_det), static_cast<float>(c12 * inv_det),
-          static_cast<float>(c22 * inv_det), ox, oy, oz);
-      conf[x] = confidenceAt(k, var, d, n_dot_r, rx * rx + yr * yr + 1.0f,
-                             edge != nullptr ? edge[x] : 1.0f);
+          cam, u, v, c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det,
+          c12 * inv_det, c22 * inv_det, ox[j], oy[j], oz[j]);
+      // d = 1 / |g|.
+      oc[j] = confidenceAt(k, var, inv_glen, n_dot_r, rx * rx + yr * yr + 1.0f,
+                           ed[j]);
+    }
+    for (int j = 0; j < count; ++j) {
+      nx[x0 + j] = ox[j];
+      ny[x0 + j] = oy[j];
+      nz[x0 + j] = oz[j];
+      if (with_conf) conf[x0 + j] = oc[j];
     }
   }
 }
@@ -335,11 +363,12 @@ void DepthNormalEstimator::setSettings(const DepthNormalSettings& settings) {
 void DepthNormalEstimator::prepare(const ScalarMap& depth_m, int pad) {
   const int W = depth_m.width(), H = depth_m.height();
   pad_ = pad;
-  z_pad_.resize(W + 2 * pad, H + 2 * pad, 1);
-  w_pad_.resize(W + 2 * pad, H + 2 * pad, 1);
+  // kBlock more columns on the right: the plane fit reads whole blocks.
+  const int Wp = W + 2 * pad + kBlock;
+  z_pad_.resize(Wp, H + 2 * pad, 1);
+  w_pad_.resize(Wp, H + 2 * pad, 1);
   z_pad_.fill(kNaN);
   w_pad_.fill(kNaN);
-  const int Wp = W + 2 * pad;
   for (int y = 0; y < H; ++y) {
     const float* in = depth_m.plane(0) + static_cast<std::size_t>(y) * W;
     const std::size_t row = static_cast<std::size_t>(y + pad) * Wp + pad;
@@ -355,47 +384,51 @@ void DepthNormalEstimator::prepare(const ScalarMap& depth_m, int pad) {
 
 void DepthNormalEstimator::edgeDistance() {
   const int Wp = z_pad_.width();
-  const int W = Wp - 2 * pad_, H = z_pad_.height() - 2 * pad_;
+  const int W = Wp - 2 * pad_ - kBlock, H = z_pad_.height() - 2 * pad_;
   const float cap = static_cast<float>(settings_.edge_distance);
+  const float ratio = static_cast<float>(settings_.discontinuity_ratio);
+  const float noise_k =
+      static_cast<float>(settings_.discontinuity_noise_sigmas * std::sqrt(2.0) *
+                         settings_.noise_coefficient);
   edge_.resize(W, H, 1);
-  edge_.fill(cap);
-  const auto z = [&](int y, int x) {
-    return z_pad_.plane(0)[static_cast<std::size_t>(y + pad_) * Wp + x + pad_];
-  };
-  // A jump between two 4-neighbours with depth: both get 0.5 (half a pixel
-  // to the jump).
-  const auto jump = [&](float a, float b) {
-    if (!(a == a) || !(b == b)) return false;
-    return std::abs(a - b) > discontinuityThreshold(std::min(a, b), settings_);
-  };
   float* e = edge_.plane(0);
+  // A jump between two 4-neighbours with depth (|a - b| > tau(min(a, b)));
+  // false where either has none (and at the NaN padding).
+  const auto jump = [ratio, noise_k](float a, float b) {
+    const float m = std::min(a, b);
+    return std::abs(a - b) > m * (ratio + noise_k * m);
+  };
+  // Pixels next to a jump are half a pixel from it.
   for (int y = 0; y < H; ++y) {
+    const float* z =
+        z_pad_.plane(0) + static_cast<std::ptrdiff_t>(y + pad_) * Wp + pad_;
+    const float* up = z - Wp;
+    const float* down = z + Wp;
+    float* row = e + static_cast<std::size_t>(y) * W;
     for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      if (x + 1 < W && jump(z(y, x), z(y, x + 1))) {
-        e[i] = std::min(e[i], 0.5f);
-        e[i + 1] = std::min(e[i + 1], 0.5f);
-      }
-      if (y + 1 < H && jump(z(y, x), z(y + 1, x))) {
-        e[i] = std::min(e[i], 0.5f);
-        e[i + W] = std::min(e[i + W], 0.5f);
-      }
+      const bool next = jump(z[x], z[x + 1]) | jump(z[x], z[x - 1]) |
+                        jump(z[x], up[x]) | jump(z[x], down[x]);
+      row[x] = next ? 0.5f : cap;
     }
   }
-  // City-block distance: a forward and a backward pass.
+  // City-block distance, separable: along the rows (two sweeps), then along
+  // the columns (two sweeps, a row at a time).
   for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      if (x > 0) e[i] = std::min(e[i], e[i - 1] + 1.0f);
-      if (y > 0) e[i] = std::min(e[i], e[i - W] + 1.0f);
+    float* row = e + static_cast<std::size_t>(y) * W;
+    for (int x = 1; x < W; ++x) row[x] = std::min(row[x], row[x - 1] + 1.0f);
+    for (int x = W - 2; x >= 0; --x) {
+      row[x] = std::min(row[x], row[x + 1] + 1.0f);
     }
   }
-  for (int y = H - 1; y >= 0; --y) {
-    for (int x = W - 1; x >= 0; --x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      if (x + 1 < W) e[i] = std::min(e[i], e[i + 1] + 1.0f);
-      if (y + 1 < H) e[i] = std::min(e[i], e[i + W] + 1.0f);
-    }
+  for (int y = 1; y < H; ++y) {
+    float* row = e + static_cast<std::size_t>(y) * W;
+    const float* prev = row - W;
+    for (int x = 0; x < W; ++x) row[x] = std::min(row[x], prev[x] + 1.0f);
+  }
+  for (int y = H - 2; y >= 0; --y) {
+    float* row = e + static_cast<std::size_t>(y) * W;
+    const float* next = row + W;
+    for (int x = 0; x < W; ++x) row[x] = std::min(row[x], next[x] + 1.0f);
   }
 }
 
@@ -427,7 +460,12 @@ void DepthNormalEstimator::compute(const ScalarMap& depth_m,
   prepare(depth_m, pad);
   const bool with_confidence = confidence != nullptr;
   const bool edge_enabled = with_confidence && s.edge_distance > 0.0;
-  if (edge_enabled) edgeDistance();
+  if (edge_enabled) {
+    edgeDistance();
+  } else {
+    edge_.resize(W, H, 1);  // factor 1 (confidenceAt ignores it)
+    edge_.fill(1.0f);
+  }
   normals.resize(W, H, 3);
   if (with_confidence) confidence->resize(W, H, 1);
 
@@ -440,8 +478,7 @@ void DepthNormalEstimator::compute(const ScalarMap& depth_m,
       s.edge_distance > 0.0 ? static_cast<float>(1.0 / s.edge_distance) : 0.0f,
       edge_enabled};
   const int threads = s.num_threads;
-  if (static_cast<int>(scratch_.size()) < threads) scratch_.resize(threads);
-  const int Wp = W + 2 * pad;
+  const int Wp = z_pad_.width();
   const float* zp = z_pad_.plane(0);
   const float* wp = w_pad_.plane(0);
   const float ratio = static_cast<float>(s.discontinuity_ratio);
@@ -452,7 +489,7 @@ void DepthNormalEstimator::compute(const ScalarMap& depth_m,
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     const std::size_t out = static_cast<std::size_t>(y) * W;
-    const float* edge_row = edge_enabled ? edge_.plane(0) + out : nullptr;
+    const float* edge_row = edge_.plane(0) + out;
     float* conf_row = with_confidence ? confidence->plane(0) + out : nullptr;
     auto row = [&](int dy, int dx) {
       return static_cast<std::size_t>(y + pad + dy) * Wp + pad + dx;
@@ -464,19 +501,9 @@ void DepthNormalEstimator::compute(const ScalarMap& depth_m,
                            normals.plane(2) + out, conf_row);
       continue;
     }
-    PlanarImage& sums = scratch_[omp_get_thread_num()];
-    sums.resize(W, kNumSums, 1);
-    sums.fill(0.0f);
-    for (int dv = -R; dv <= R; ++dv) {
-      for (int du = -R; du <= R; ++du) {
-        accumulateNeighbour(W, static_cast<float>(du), static_cast<float>(dv),
-                            ratio, noise_k, zp + row(0, 0), wp + row(0, 0),
-                            zp + row(dv, du), wp + row(dv, du), sums.data(), W);
-      }
-    }
-    solvePlaneRow(W, y, cam, sums.data(), W, wp + row(0, 0), edge_row, cc,
-                  normals.plane(0) + out, normals.plane(1) + out,
-                  normals.plane(2) + out, conf_row);
+    planeFitRow(W, y, R, Wp, cam, ratio, noise_k, zp + row(0, 0),
+                wp + row(0, 0), edge_row, cc, normals.plane(0) + out,
+                normals.plane(1) + out, normals.plane(2) + out, conf_row);
   }
 }
 
