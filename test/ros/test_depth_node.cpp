@@ -189,6 +189,13 @@ nf::NormalMap normalsOf(const sensor_msgs::Image& msg) {
   return n;
 }
 
+/// Under test/ros/rgbd.test (~rgbd true) only the Rgbd test runs.
+bool rgbdMode() {
+  bool rgbd = false;
+  ros::NodeHandle("~").getParam("rgbd", rgbd);
+  return rgbd;
+}
+
 bool answered(Client& client, const Client::Frame& f, double seconds = 5.0) {
   client.publish(f);
   const ros::Time stamp = f.depth->header.stamp;
@@ -196,6 +203,7 @@ bool answered(Client& client, const Client::Frame& f, double seconds = 5.0) {
 }
 
 TEST(DepthNode, SubscribesOnlyWhileSomeoneListens) {
+  if (rgbdMode()) GTEST_SKIP();
   Client client;
   ros::WallDuration(1.0).sleep();
   EXPECT_EQ(client.inputSubscribers(), 0) << "subscribed with no listener";
@@ -210,6 +218,7 @@ TEST(DepthNode, SubscribesOnlyWhileSomeoneListens) {
 }
 
 TEST(DepthNode, NormalsAndConfidenceForEachFrame) {
+  if (rgbdMode()) GTEST_SKIP();
   Client client;
   client.listen(true, true);
   ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 2; }, 5.0));
@@ -334,6 +343,7 @@ std::vector<BadCase> badCases() {
 }
 
 TEST(DepthNode, BadDepthIsSkippedAndTheNextGoodFrameAnswered) {
+  if (rgbdMode()) GTEST_SKIP();
   Client client;
   client.listen(true, false);
   ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 2; }, 5.0));
@@ -356,6 +366,75 @@ TEST(DepthNode, BadDepthIsSkippedAndTheNextGoodFrameAnswered) {
         << c.what << ": no error naming " << c.logged[0] << " and '"
         << c.logged[1] << "'";
   }
+}
+
+/// launch/rgbd.launch: colour image, its camera_info and the aligned depth
+/// in; the fused map of the depth's normals (with their confidence) out.
+TEST(Rgbd, DepthNormalsAreFusedGuidedByTheImage) {
+  if (!rgbdMode()) GTEST_SKIP();
+  ros::NodeHandle nh;
+  auto image_pub =
+      nh.advertise<sensor_msgs::Image>("/camera/color/image_raw", 5);
+  auto info_pub =
+      nh.advertise<sensor_msgs::CameraInfo>("/camera/color/camera_info", 5);
+  auto depth_pub = nh.advertise<sensor_msgs::Image>(
+      "/camera/aligned_depth_to_color/image_raw", 5);
+  auto depth_info_pub = nh.advertise<sensor_msgs::CameraInfo>(
+      "/camera/aligned_depth_to_color/camera_info", 5);
+  std::mutex mutex;
+  std::map<ros::Time, sensor_msgs::ImageConstPtr> fused;
+  auto sub = nh.subscribe<sensor_msgs::Image>(
+      "/fused_normals", 5, [&](const sensor_msgs::ImageConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mutex);
+        fused[m->header.stamp] = m;
+      });
+  // The fusion subscribes to the depth normals, they to the depth.
+  ASSERT_TRUE(waitFor(
+      [&] {
+        return image_pub.getNumSubscribers() > 0 &&
+               depth_pub.getNumSubscribers() > 0 &&
+               depth_info_pub.getNumSubscribers() > 0;
+      },
+      10.0));
+  const nf::synthetic::Frame& f = scene();
+  sensor_msgs::ImageConstPtr out;
+  std_msgs::Header h;
+  for (int k = 0; k < 20 && !out; ++k) {
+    h = newHeader();
+    auto image = boost::make_shared<sensor_msgs::Image>();
+    image->header = h;
+    image->width = kWidth;
+    image->height = kHeight;
+    image->encoding = "rgb8";
+    image->step = 3 * kWidth;
+    image->data.resize(image->step * kHeight);
+    for (int y = 0; y < kHeight; ++y) {
+      for (int x = 0; x < kWidth; ++x) {
+        for (int c = 0; c < 3; ++c) {
+          image->data[y * image->step + 3 * x + c] = static_cast<std::uint8_t>(
+              std::lround(255 * std::min(1.0f, f.image.at(c, y, x))));
+        }
+      }
+    }
+    info_pub.publish(infoMessage(f.K, h));
+    depth_info_pub.publish(infoMessage(f.K, h));
+    depth_pub.publish(depthMessage(f.depth, h, true));
+    image_pub.publish(image);
+    waitFor(
+        [&] {
+          std::lock_guard<std::mutex> lock(mutex);
+          auto it = fused.find(h.stamp);
+          if (it != fused.end()) out = it->second;
+          return out != nullptr;
+        },
+        2.0);
+  }
+  ASSERT_TRUE(out) << "no fused map";
+  EXPECT_EQ(out->header.frame_id, h.frame_id);
+  const nf::NormalMap n = normalsOf(*out);
+  const nf::AngularErrorStats e = nf::angularError(n, f.normals_gt);
+  EXPECT_LT(e.median_deg, 5.0);
+  EXPECT_GT(e.pixel_count, kWidth * kHeight * 9 / 10);
 }
 
 }  // namespace
