@@ -172,7 +172,7 @@ void centralDifferenceRow(int width, int y, const Camera& cam,
 
 /// Pixels per block of the plane fit: the window sums of a block stay in
 /// registers while the window's neighbours are added.
-constexpr int kBlock = 8;
+constexpr int kBlock = 16;
 
 /// One row of plane fits. z, w: the padded depth and inverse depth at the
 /// row's first pixel (rows `stride` apart, at least kBlock - 1 readable
