@@ -1,6 +1,11 @@
 #!/usr/bin/env bash
-# Sets up, builds and runs every test of normal_fusion (unit tests and rostests).
-# Exits non-zero when any test fails.
+# Sets up, builds and runs every test of normal_fusion (unit tests and rostests),
+# then the platform checks: no compiler warning in the package's sources,
+# every installed header compiled as a downstream C++14 package would
+# (scripts/check_headers.sh), catkin_lint, and the package built with g++-11,
+# clang++-14 and without OpenCV contrib, with unit tests
+# (scripts/check_builds.sh). Exits non-zero when any test or check fails.
+# Arguments go to ctest; NF_EXTRA_BUILDS=0 leaves out the other builds.
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -20,3 +25,17 @@ set +u
 source "$ws/devel/setup.bash"
 set -u
 ctest --output-on-failure "$@"
+
+echo "== platform checks"
+bash "$repo/scripts/check_builds.sh" --warnings "$ws/build.log" "$ws/build_tests.log"
+bash "$repo/scripts/check_headers.sh" "$ws"
+# --strict: warnings fail too (the default level shows errors and warnings).
+lint="$(catkin_lint --strict "$repo" 2>&1)" || {
+  echo "$lint"
+  echo "normal_fusion: catkin_lint reports problems" >&2
+  exit 1
+}
+echo "normal_fusion: catkin_lint clean"
+if [ "${NF_EXTRA_BUILDS:-1}" != "0" ]; then
+  bash "$repo/scripts/check_builds.sh"
+fi

@@ -13,9 +13,11 @@ PACKAGES=(
   librostest-dev python3-rostest python3-roslaunch python3-rosmaster rosout
   python3-rostopic python3-rosbag python3-sensor-msgs python3-rosnode python3-rosparam
   python3-rosservice libgtest-dev libgmock-dev libopencv-dev libopencv-contrib-dev
-  libeigen3-dev libbenchmark-dev libyaml-cpp-dev
+  libbenchmark-dev libyaml-cpp-dev
   librosbag-dev libtf2-ros-dev libdiagnostic-updater-dev ros-diagnostic-msgs
-  rosbash python3-nodelet
+  python3-diagnostic-msgs rosbash python3-nodelet
+  # The platform checks of scripts/run_tests.sh: other compilers, catkin_lint.
+  g++-11 clang-14 libomp-14-dev catkin-lint
 )
 # Optional data: the ViSP image set (real and synthetic RGB-D sequences). GPL-2 data,
 # installed at run time and never copied into the repository.

@@ -112,8 +112,8 @@ double percentile(std::vector<double> v, double q) {
 
 double shareAbove(const std::vector<double>& v, double bound) {
   if (v.empty()) return 0.0;
-  return static_cast<double>(std::count_if(v.begin(), v.end(),
-                                           [&](double x) { return x > bound; })) /
+  return static_cast<double>(std::count_if(
+             v.begin(), v.end(), [&](double x) { return x > bound; })) /
          v.size();
 }
 
@@ -181,11 +181,11 @@ int main(int argc, char** argv) {
   for (int k = 0; k < frames; ++k) {
     const nf::test::NoisyFrame f = nf::test::noisyFrame(sequence[k], 500 + k);
     const std_msgs::Header header = nf::test::makeHeader(1.0);
-    messages.push_back({nf::test::imageMessage(f.frame.image, header),
-                        nf::test::normalsMessage(f.noisy, header),
-                        nf::test::normalsMessage(f.from_depth, header),
-                        nf::test::cameraInfoMessage(f.frame.K, o.width,
-                                                    o.height, header)});
+    messages.push_back(
+        {nf::test::imageMessage(f.frame.image, header),
+         nf::test::normalsMessage(f.noisy, header),
+         nf::test::normalsMessage(f.from_depth, header),
+         nf::test::cameraInfoMessage(f.frame.K, o.width, o.height, header)});
   }
   const int pid = pidOf(o.process);
   if (pid < 0) {
@@ -196,9 +196,10 @@ int main(int argc, char** argv) {
     ros::WallDuration(0.1).sleep();
   }
   if (image_pub.getNumSubscribers() == 0) {
-    std::fprintf(stderr, "bench_soak: nobody subscribes to /image (is the "
-                         "node up and lazy? bench_soak subscribes to "
-                         "/fusion_stats)\n");
+    std::fprintf(stderr,
+                 "bench_soak: nobody subscribes to /image (is the "
+                 "node up and lazy? bench_soak subscribes to "
+                 "/fusion_stats)\n");
     return 1;
   }
   std::fprintf(stderr, "bench_soak: %.0f s at %.0f Hz into %s (pid %d)\n",
@@ -284,7 +285,8 @@ int main(int argc, char** argv) {
               ms(percentile(queue_time, 0.5)), ms(percentile(queue_time, 0.95)),
               ms(percentile(queue_time, 1.0)));
   std::printf("| solve time p50 / p95 | %.1f / %.1f ms |\n",
-              ms(percentile(solve_time, 0.5)), ms(percentile(solve_time, 0.95)));
+              ms(percentile(solve_time, 0.5)),
+              ms(percentile(solve_time, 0.95)));
   std::printf(
       "| resident memory: start / end, slope after %.0f s | %.1f / %.1f MiB, "
       "%.2f MiB/min |\n",

@@ -547,8 +547,6 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
 
 namespace {
 
-constexpr int kEnergyBlock = ActiveBuffers::kEnergyBlock;
-
 /// Sum over links [m0, m1) of w huber_eps(|n_b - n_a|).
 NF_MULTIVERSION
 float linkEnergyBlock(int m0, int m1, float eps, const int* __restrict a,

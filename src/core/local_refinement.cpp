@@ -656,7 +656,7 @@ void mapEdgesRow(int count, float min_cos, const float* __restrict nx,
     };
     const bool any =
         apart(left + k) | apart(right + k) | apart(up + k) | apart(down + k);
-    edge[i + k] = (u[i + k] == 0) & any ? 1 : 0;
+    edge[i + k] = ((u[i + k] == 0) & any) ? 1 : 0;
   }
 }
 

@@ -191,9 +191,10 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
     auto dot = [&](const float(&p)[3][kChunk], const float(&q)[3][kChunk]) {
       return p[0][j] * q[0][j] + p[1][j] * q[1][j] + p[2][j] * q[2][j];
     };
-    const bool blend = (dot(a, b) >= cos_blend) & (dot(a, c) >= cos_blend) &
-                       (dot(a, e) >= cos_blend) & (dot(b, c) >= cos_blend) &
-                       (dot(b, e) >= cos_blend) & (dot(c, e) >= cos_blend);
+    const bool ab = dot(a, b) >= cos_blend, ac = dot(a, c) >= cos_blend;
+    const bool ae = dot(a, e) >= cos_blend, bc = dot(b, c) >= cos_blend;
+    const bool be = dot(b, e) >= cos_blend, ce = dot(c, e) >= cos_blend;
+    const bool blend = ab & ac & ae & bc & be & ce;
     // The blend (bilinearRotate()), rotated into the current frame.
     float s[3];
     for (int ch = 0; ch < 3; ++ch) {

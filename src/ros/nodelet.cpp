@@ -1,12 +1,14 @@
 #include "normal_fusion/ros/nodelet.h"
 
 #include <dynamic_reconfigure/Config.h>
+#include <dynamic_reconfigure/ConfigDescription.h>
 #include <pluginlib/class_list_macros.hpp>
 
 #include <algorithm>
 #include <cctype>
 #include <cstdlib>
 #include <sstream>
+#include <type_traits>
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
@@ -181,6 +183,7 @@ void NormalFusionNodelet::onInit() {
   }
   reconfigure_server_->setCallback(
       [this](Config& config, uint32_t level) { configCb(config, level); });
+  publishParameterRanges();
 
   worker_ = std::thread([this] { workerLoop(); });
 
@@ -230,6 +233,37 @@ void NormalFusionNodelet::onInit() {
       settings_.num_inputs,
       settings_.approximate_sync ? "approximate" : "exact", inputs.c_str(),
       wait_policy != nullptr && *wait_policy != '\0' ? wait_policy : "unset");
+}
+
+void NormalFusionNodelet::publishParameterRanges() {
+  // The .cfg declares no bounds, since dynamic_reconfigure would clamp to
+  // them silently before the node can refuse a value with a warning; the
+  // clients (rqt_reconfigure) get the node's own ranges in the description,
+  // which replaces the server's on the same latched topic.
+  dynamic_reconfigure::ConfigDescription description =
+      Config::__getDescriptionMessage__();
+  std::map<std::string, ParameterRange> ranges;
+  for (const ParameterRange& r : numericParameterRanges()) ranges[r.name] = r;
+  auto bound = [&](auto& values, bool is_max) {
+    for (auto& p : values) {
+      auto it = ranges.find(p.name);
+      if (it == ranges.end()) continue;
+      // An open lower bound of 0 shows as 0.
+      const double v = is_max ? it->second.max
+                              : (it->second.min > 0.0 && it->second.min < 1e-300
+                                     ? 0.0
+                                     : it->second.min);
+      p.value = static_cast<std::decay_t<decltype(p.value)>>(v);
+    }
+  };
+  bound(description.min.doubles, false);
+  bound(description.max.doubles, true);
+  bound(description.min.ints, false);
+  bound(description.max.ints, true);
+  pub_description_ =
+      getPrivateNodeHandle().advertise<dynamic_reconfigure::ConfigDescription>(
+          "parameter_descriptions", 1, true);
+  pub_description_.publish(description);
 }
 
 NormalFusionNodelet::Synchronizer::Options NormalFusionNodelet::syncOptions(

@@ -38,8 +38,8 @@ template <typename Visitor>
 void visitParameters(NodeSettings& s, Visitor& v) {
   SolverSettings& solver = s.solver;
   // Model.
-  v.positive("lambda", solver.lambda);  // 0 would ignore every input
-  v.real("huber_eps", solver.huber_eps, 0.0, kInf);
+  v.positive("lambda", solver.lambda, 1e6);  // 0 would ignore every input
+  v.real("huber_eps", solver.huber_eps, 0.0, 10.0);
   v.choice("penalty", solver.penalty, parseDataPenalty);
   v.choice("visibility", solver.visibility, parseVisibilityMode);
   v.real("data_eps", solver.data_eps, 0.0, 2.0);
@@ -50,8 +50,8 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   // Edge weights.
   v.flag("edge_enabled", solver.edges.enabled);
   v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, 10.0);
-  v.real("edge_alpha", solver.edges.alpha, 0.0, kInf);
-  v.real("edge_beta", solver.edges.beta, 0.0, kInf);
+  v.real("edge_alpha", solver.edges.alpha, 0.0, 1e4);
+  v.real("edge_beta", solver.edges.beta, 0.0, 10.0);
   v.real("edge_w_min", solver.edges.w_min, 0.0, 1.0);
   v.choice("edge_color_mode", solver.edges.color_mode, parseEdgeColorMode);
   v.choice("edge_function", solver.edges.function, parseEdgeWeightFunction);
@@ -61,9 +61,9 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.integer("max_outer_iterations", solver.max_outer_iterations, 1, kIntMax);
   v.integer("max_total_inner_iterations", solver.max_total_inner_iterations, 1,
             kIntMax);
-  v.real("relative_tolerance", solver.relative_tolerance, 0.0, kInf);
-  v.real("time_budget_ms", solver.time_budget_ms, 0.0, kInf);
-  v.real("cold_start_budget_ms", solver.cold_start_budget_ms, 0.0, kInf);
+  v.real("relative_tolerance", solver.relative_tolerance, 0.0, 1.0);
+  v.real("time_budget_ms", solver.time_budget_ms, 0.0, 1e6);
+  v.real("cold_start_budget_ms", solver.cold_start_budget_ms, 0.0, 1e6);
   v.integer("warm_refine_iterations", solver.warm_refine_iterations, 0, 100000);
   v.integer("warm_refine_radius", solver.warm_refine_radius, 0, 16);
   v.integer("pyramid_levels", solver.pyramid_levels, 0, 12);
@@ -72,15 +72,15 @@ void visitParameters(NodeSettings& s, Visitor& v) {
   v.flag("adaptive_refine_threads", solver.adaptive_refine_threads);
   v.choice("backend", solver.backend, parseSolverBackend);
   v.flag("preconditioning", solver.preconditioning);
-  v.real("tau", solver.tau, 0.0, kInf);
-  v.real("sigma", solver.sigma, 0.0, kInf);
+  v.real("tau", solver.tau, 0.0, 1e3);
+  v.real("sigma", solver.sigma, 0.0, 1e3);
   v.real("step_balance", solver.step_balance, 1e-3, 1e3);
 
   // The node: inputs.
   v.integer("num_inputs", s.num_inputs, 1, kMaxInputs);
   for (int i = 0; i < kMaxInputs; ++i) {
     InputSettings& input = s.inputs[i];
-    v.real(indexed("weight", i).c_str(), input.weight, 0.0, kInf);
+    v.real(indexed("weight", i).c_str(), input.weight, 0.0, 1e6);
     v.orientation(indexed("orientation", i).c_str(), input);
     v.flag(indexed("use_confidence", i).c_str(), input.use_confidence);
     v.flag(indexed("optional", i).c_str(), input.optional);
@@ -161,8 +161,8 @@ class Reader {
     it->second = value;
   }
 
-  /// A finite number that must be > 0: anything else gets the default.
-  void positive(const char* name, double& field) {
+  /// A finite number in (0, hi]: anything else keeps the value in use.
+  void positive(const char* name, double& field, double hi) {
     seen_.insert(name);
     auto it = params_.find(name);
     if (it == params_.end()) {
@@ -179,8 +179,9 @@ class Reader {
           it, field,
           "expected a number > 0, got a " + std::string(typeName(it->second)));
     }
-    if (!(value > 0.0) || !std::isfinite(value)) {
-      return replace(it, field, "expected a finite number > 0");
+    if (!(value > 0.0) || !(value <= hi)) {
+      return replace(it, field,
+                     "expected a number in (0, " + numberText(hi) + "]");
     }
     field = value;
     it->second = value;
@@ -323,7 +324,9 @@ class Writer {
   void integer(const char* name, int& field, int, int) {
     params_[name] = field;
   }
-  void positive(const char* name, double& field) { params_[name] = field; }
+  void positive(const char* name, double& field, double) {
+    params_[name] = field;
+  }
   void flag(const char* name, bool& field) { params_[name] = field; }
   void text(const char* name, std::string& field) { params_[name] = field; }
   template <typename Enum, typename Parse>
@@ -338,7 +341,41 @@ class Writer {
   ParameterMap& params_;
 };
 
+/// The numeric parameters' ranges.
+class RangeCollector {
+ public:
+  explicit RangeCollector(std::vector<ParameterRange>* ranges)
+      : ranges_(ranges) {}
+  void real(const char* name, double&, double lo, double hi) {
+    ranges_->push_back({name, lo, hi});
+  }
+  void integer(const char* name, int&, int lo, int hi) {
+    ranges_->push_back(
+        {name, static_cast<double>(lo), static_cast<double>(hi)});
+  }
+  void positive(const char* name, double&, double hi) {
+    // (0, hi]: the smallest positive double stands for the open bound.
+    ranges_->push_back({name, std::numeric_limits<double>::denorm_min(), hi});
+  }
+  void flag(const char*, bool&) {}
+  void text(const char*, std::string&) {}
+  template <typename Enum, typename Parse>
+  void choice(const char*, Enum&, Parse) {}
+  void orientation(const char*, InputSettings&) {}
+
+ private:
+  std::vector<ParameterRange>* ranges_;
+};
+
 }  // namespace
+
+std::vector<ParameterRange> numericParameterRanges() {
+  std::vector<ParameterRange> ranges;
+  NodeSettings settings;
+  RangeCollector collector(&ranges);
+  visitParameters(settings, collector);
+  return ranges;
+}
 
 bool isDynamicParameter(const std::string& name) {
   if (name == "num_inputs" || name == "approximate_sync" ||

@@ -4,6 +4,7 @@
 // With ~compare_namespaces set, it checks instead that two nodes in those
 // namespaces (the nodelet and the standalone node) give the same outputs.
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/ConfigDescription.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <normal_fusion/FusionStats.h>
@@ -419,8 +420,7 @@ TEST(Node, PublishesDiagnostics) {
       },
       3.0))
       << "level " << int(status.level) << ": " << status.message;
-  EXPECT_NE(status.message.find("/image"), std::string::npos)
-      << status.message;
+  EXPECT_NE(status.message.find("/image"), std::string::npos) << status.message;
   EXPECT_TRUE(answered(client, client.messagesFor(sceneFrame(), newStamp())));
 }
 
@@ -839,6 +839,48 @@ TEST(Node, DynamicReconfigureTakesEffectOnTheNextFrame) {
 
 /// The warm start and the inputs' temporal averages (temporal_frames, set
 /// through dynamic_reconfigure) carried by the camera's rotation from tf.
+/// rqt_reconfigure's view: every dynamic numeric parameter has the node's
+/// finite range in the description (the .cfg declares none, so that the
+/// node itself refuses out-of-range values with a warning).
+TEST(Node, DescriptionCarriesEveryNumericRange) {
+  if (compareMode()) GTEST_SKIP();
+  std::mutex mutex;
+  dynamic_reconfigure::ConfigDescription description;
+  bool received = false;
+  ros::NodeHandle nh;
+  ros::Subscriber sub = nh.subscribe<dynamic_reconfigure::ConfigDescription>(
+      nodeName() + "/parameter_descriptions", 1,
+      [&](const dynamic_reconfigure::ConfigDescriptionConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mutex);
+        description = *m;
+        received = true;
+      });
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        return received;
+      },
+      5.0));
+  std::lock_guard<std::mutex> lock(mutex);
+  std::map<std::string, std::pair<double, double>> shown;
+  for (const auto& p : description.min.doubles) shown[p.name].first = p.value;
+  for (const auto& p : description.max.doubles) shown[p.name].second = p.value;
+  for (const auto& p : description.min.ints) shown[p.name].first = p.value;
+  for (const auto& p : description.max.ints) shown[p.name].second = p.value;
+  int checked = 0;
+  for (const auto& range : nf::node::numericParameterRanges()) {
+    if (!nf::node::isDynamicParameter(range.name)) continue;
+    ASSERT_EQ(shown.count(range.name), 1u) << range.name;
+    const auto [lo, hi] = shown[range.name];
+    EXPECT_TRUE(std::isfinite(lo) && std::isfinite(hi)) << range.name;
+    EXPECT_EQ(hi, range.max) << range.name;
+    EXPECT_EQ(lo, range.min < 1e-300 ? 0.0 : range.min) << range.name;
+    ++checked;
+  }
+  EXPECT_GE(checked, 39);  // 31 settings and 8 input weights
+  EXPECT_EQ(shown["edge_w_min"], std::make_pair(0.0, 1.0));
+}
+
 /// The configuration as a map name -> value text, for comparisons.
 std::map<std::string, std::string> configValues(
     const dynamic_reconfigure::Config& config) {

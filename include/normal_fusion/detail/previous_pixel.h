@@ -67,8 +67,8 @@ class PreviousPixel {
 
   static double clampNear(double t, double high) {
     constexpr double kSlack = 1e-6;
-    const double low_clamped = (t < 0.0) & (t > -kSlack) ? 0.0 : t;
-    return (t > high) & (t < high + kSlack) ? high : low_clamped;
+    const double low_clamped = ((t < 0.0) & (t > -kSlack)) ? 0.0 : t;
+    return ((t > high) & (t < high + kSlack)) ? high : low_clamped;
   }
 
  private:

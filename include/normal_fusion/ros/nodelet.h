@@ -54,6 +54,8 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   void handleMessage(int topic, const std_msgs::Header& header,
                      const QueuedMessage& message);
   void configCb(Config& config, uint32_t level);
+  /// The parameters' ranges to dynamic_reconfigure clients.
+  void publishParameterRanges();
   void workerLoop();
   void publishOutputs(const PipelineOutput& output);
   void checkMissingInputs();
@@ -105,6 +107,7 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   bool settings_changed_ = false;
   std::unique_ptr<dynamic_reconfigure::Server<Config>> reconfigure_server_;
   boost::recursive_mutex reconfigure_mutex_;
+  ros::Publisher pub_description_;
 
   // tf2, for the rotation-compensated warm start.
   std::shared_ptr<tf2_ros::Buffer> tf_buffer_;

@@ -92,6 +92,17 @@ struct NodeSettings {
 /// the arrival checks or the diagnostics and are read at start only.
 bool isDynamicParameter(const std::string& name);
 
+/// The range a numeric parameter accepts (inclusive; an open lower bound of 0
+/// is the smallest positive double).
+struct ParameterRange {
+  std::string name;
+  double min, max;
+};
+
+/// Every numeric parameter's range, as settingsFromParameters checks it (the
+/// node also publishes them to dynamic_reconfigure clients).
+std::vector<ParameterRange> numericParameterRanges();
+
 /// Every parameter with the value `settings` gives it.
 ParameterMap parametersFromSettings(const NodeSettings& settings);
 
