@@ -396,7 +396,7 @@ void DepthNormalEstimator::edgeDistance() {
   // false where either has none (and at the NaN padding).
   const auto jump = [ratio, noise_k](float a, float b) {
     const float m = std::min(a, b);
-    return std::abs(a - b) > m * (ratio + noise_k * m);
+    return std::abs(a - b) > m * (ratio + noise_k * m) ? 1 : 0;
   };
   // Pixels next to a jump are half a pixel from it.
   for (int y = 0; y < H; ++y) {
@@ -406,9 +406,10 @@ void DepthNormalEstimator::edgeDistance() {
     const float* down = z + Wp;
     float* row = e + static_cast<std::size_t>(y) * W;
     for (int x = 0; x < W; ++x) {
-      const bool next = jump(z[x], z[x + 1]) | jump(z[x], z[x - 1]) |
-                        jump(z[x], up[x]) | jump(z[x], down[x]);
-      row[x] = next ? 0.5f : cap;
+      // Branch-free (it vectorizes): a sum of 0 / 1 instead of ||.
+      const int jumps = jump(z[x], z[x + 1]) + jump(z[x], z[x - 1]) +
+                        jump(z[x], up[x]) + jump(z[x], down[x]);
+      row[x] = jumps > 0 ? 0.5f : cap;
     }
   }
   // City-block distance, separable: along the rows (two sweeps), then along

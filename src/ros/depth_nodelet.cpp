@@ -43,6 +43,8 @@ DepthNodeSettings depthSettingsFromParameters(
     } catch (const Error& e) {
       warn("method", e.what());
     }
+  } else if (pnh.hasParam("method")) {
+    warn("method", "expected a string (central_difference or plane_fit)");
   }
   // Each number on its own: a value out of range keeps the default.
   const auto number = [&](const char* name, double* field) {
@@ -87,6 +89,20 @@ DepthNodeSettings depthSettingsFromParameters(
   integer("queue_size", &s.queue_size, 1, 100);
   integer("max_pixels", &s.max_pixels, 0, 2000000000);
   return s;
+}
+
+void writeDepthParameters(const DepthNodeSettings& s, ros::NodeHandle& pnh) {
+  const depth::DepthNormalSettings& n = s.normals;
+  pnh.setParam("method", depth::toString(n.method));
+  pnh.setParam("window_radius", n.window_radius);
+  pnh.setParam("discontinuity_ratio", n.discontinuity_ratio);
+  pnh.setParam("discontinuity_noise_sigmas", n.discontinuity_noise_sigmas);
+  pnh.setParam("noise_coefficient", n.noise_coefficient);
+  pnh.setParam("normal_sigma_scale", n.normal_sigma_scale);
+  pnh.setParam("edge_distance", n.edge_distance);
+  pnh.setParam("num_threads", n.num_threads);
+  pnh.setParam("queue_size", s.queue_size);
+  pnh.setParam("max_pixels", s.max_pixels);
 }
 
 void depthFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
@@ -138,6 +154,8 @@ void DepthToNormalsNodelet::onInit() {
   std::vector<std::string> warnings;
   settings_ = depthSettingsFromParameters(pnh, &warnings);
   for (const std::string& w : warnings) NODELET_WARN("%s", w.c_str());
+  // The values in use, for anyone who asks the parameter server.
+  writeDepthParameters(settings_, pnh);
   estimator_.setSettings(settings_.normals);
   limits_.max_pixels = static_cast<std::uint64_t>(settings_.max_pixels);
   topic_names_[kDepth] = nh.resolveName("depth");

@@ -275,6 +275,26 @@ TEST(DepthNode, NormalsAndConfidenceForEachFrame) {
   EXPECT_LT(between.median_deg, 2.0);
 }
 
+/// Under depth_standalone.test (~expect_defaults) the node was started with
+/// refused values: the parameter server holds the defaults it uses instead.
+TEST(DepthNode, RefusedParametersKeepTheirDefaults) {
+  bool expect_defaults = false;
+  ros::NodeHandle("~").getParam("expect_defaults", expect_defaults);
+  if (rgbdMode() || !expect_defaults) GTEST_SKIP();
+  ros::NodeHandle pnh("/depth_to_normals");
+  std::string method;
+  int window_radius = 0;
+  double noise_coefficient = 0.0, edge_distance = 0.0;
+  EXPECT_TRUE(pnh.getParam("method", method));
+  EXPECT_TRUE(pnh.getParam("window_radius", window_radius));
+  EXPECT_TRUE(pnh.getParam("noise_coefficient", noise_coefficient));
+  EXPECT_TRUE(pnh.getParam("edge_distance", edge_distance));
+  EXPECT_EQ(method, "plane_fit");
+  EXPECT_EQ(window_radius, 2);
+  EXPECT_DOUBLE_EQ(noise_coefficient, 0.0025);
+  EXPECT_DOUBLE_EQ(edge_distance, 3.0);
+}
+
 struct BadCase {
   const char* what;
   std::function<void(Client::Frame&)> spoil;

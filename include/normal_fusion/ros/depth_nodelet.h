@@ -41,6 +41,10 @@ struct DepthNodeSettings {
 DepthNodeSettings depthSettingsFromParameters(
     const ros::NodeHandle& pnh, std::vector<std::string>* warnings);
 
+/// Writes the settings in use back to the private parameters.
+void writeDepthParameters(const DepthNodeSettings& settings,
+                          ros::NodeHandle& pnh);
+
 /// The depth message in metres (NaN = no depth): 16UC1 / mono16 in
 /// millimetres, 32FC1 in metres. Throws InputError naming the topic for
 /// another encoding or a depth image without any valid pixel.
