@@ -3,7 +3,7 @@
 //    640x480 (counter "pixel_iter_per_s"), inner iterations only.
 //  - BM_PaperWorkload/<threads>: the paper's workload, 640x480, L = 1, 1000
 //    inner iterations in total (20 outer x 50 inner), wall time of one solve.
-// Run: bench_solver --benchmark_min_time=2 (see README for recorded figures).
+// Run: bench_solver --benchmark_min_time=2 (see docs/performance.md for recorded figures).
 #include <benchmark/benchmark.h>
 
 #include <cmath>

@@ -20,6 +20,12 @@ class InputError : public Error {
   explicit InputError(const std::string& what) : Error(what) {}
 };
 
+/// A caller asked the solve to stop (Solver::requestCancel).
+class Cancelled : public Error {
+ public:
+  explicit Cancelled(const std::string& what) : Error(what) {}
+};
+
 /// A setting is out of its range (negative, NaN, inconsistent).
 class ParameterError : public Error {
  public:

@@ -59,7 +59,7 @@ struct EdgeWeightSettings {
 struct SolverSettings {
   // Model.
   // Defaults: the best set found by `evaluate` on the synthetic scenes (the
-  // paper used lambda = 1, eps = 0.05 with Sobel weights; see README).
+  // paper used lambda = 1, eps = 0.05 with Sobel weights; see docs/accuracy.md).
   double lambda = 0.5;     ///< global data weight (the paper's lambda)
   double huber_eps = 0.0;  ///< Huber threshold; 0 = plain total variation
   DataPenalty penalty = DataPenalty::kL2;
@@ -91,7 +91,7 @@ struct SolverSettings {
   /// multiplied by this, in (0, 1] (1 = off, the default): a pixel next to an
   /// observed surface and inside a hole (a dropout, a silhouette's rim)
   /// follows that surface rather than the empty region around it. Fixed
-  /// before the solve. 0.5 fills Castle's holes better (see README) but also
+  /// before the solve. 0.5 fills Castle's holes better (see docs/accuracy.md) but also
   /// acts like a larger lambda for sparse inputs, whose pixels are nearly all
   /// holes.
   double hole_link_weight = 1.0;
@@ -158,7 +158,7 @@ struct SolverSettings {
   /// the pyramid's coarser levels, which keep 1 (their normals start far
   /// from their solution: filled in, or cold). 0.25 reaches 1e-3 of the
   /// converged energy about 2.5x sooner than 1, and 1e-4 where 1 does not
-  /// within 4000 iterations (bench_time_to_solution; docs/PERFORMANCE.md).
+  /// within 4000 iterations (bench_time_to_solution; docs/performance.md).
   double step_balance = 0.25;
 
   /// Throws ParameterError naming the first setting that is out of range.

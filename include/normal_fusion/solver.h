@@ -41,6 +41,8 @@ struct SolverState {
   /// the first warm frame does not pay for it.
   void resize(int width, int height, int num_inputs);
   void clear();
+  /// Bytes of memory its buffers hold (their capacity).
+  std::size_t bytesHeld() const;
 };
 
 /// What a solve did.
@@ -79,6 +81,9 @@ struct SolveReport {
   bool warm_started = false;
   bool converged = false;         ///< stopped on the relative tolerance
   bool budget_exhausted = false;  ///< stopped on the wall-clock budget
+  /// Stopped by Solver::requestCancel(): the frame is unfinished (not to be
+  /// published); see there for what the state then holds.
+  bool cancelled = false;
   /// A stream's cold start under time_budget_ms: the solve ran under
   /// SolverSettings::cold_start_budget_ms instead.
   bool cold_start_budget_used = false;
@@ -91,7 +96,13 @@ struct SolveReport {
 class SolverImpl;
 
 /// Solves frame after frame, reusing its buffers. Not thread-safe: one solve at
-/// a time per instance.
+/// a time per instance; only the cancellation below may be called from other
+/// threads.
+///
+/// Memory: buffers are sized on the first frame of a size and reused, so a
+/// stream of frames of one size allocates nothing once running; a frame
+/// much smaller than the one before (below a quarter of the values a buffer
+/// has room for) gives the larger buffers' memory back (PlanarImage::resize()).
 class Solver {
  public:
   explicit Solver(const SolverSettings& settings = SolverSettings());
@@ -125,8 +136,49 @@ class Solver {
   /// Applies to that one solve.
   void setBudgetStart(std::chrono::steady_clock::time_point frame_start);
 
-  /// Convenience: cold start, returns the fused normals.
+  /// Convenience: cold start, returns the fused normals (empty when
+  /// cancelled before the iterations began; see requestCancel()).
   NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);
+
+  /// Cancellation. Asks the solve in progress to stop, and every later
+  /// solve to stop at once, until clearCancel(). Thread-safe, from any
+  /// thread (a lock-free atomic store: also from a signal handler).
+  ///
+  /// A solve reads the request before it starts, between the steps of the
+  /// input preparation, and inside the inner iterations of every pyramid
+  /// level, of the outer loop and of the warm start's local refinement
+  /// (every row of the fast backend's sweeps, every iteration of the
+  /// reference backend), so it returns within about one iteration of the
+  /// request. It then returns normally (no exception: the state stays
+  /// usable) with SolveReport::cancelled set, and:
+  /// - before the iterations began (requested before the call, or while
+  ///   the inputs and the pyramid were prepared): with `state` unchanged
+  ///   (a request before the call: at once, the problem not even
+  ///   validated);
+  /// - later: `state` holds the problem's size, unit normals and finite
+  ///   duals: the last accepted outer step of the finest level, or the
+  ///   start it had reached (the warm start as made usable so far, or the
+  ///   cold start / the upsampled coarser level). Iterations after that
+  ///   step are dropped. Report entries of what did not run stay 0 (energies
+  ///   empty and NaN when the finest level's were not measured).
+  /// Uncancelled solves are unchanged by the checks (the same bits).
+  ///
+  /// The solver never withdraws a request itself, in particular not when a
+  /// solve starts: a request made just before solve() (e.g. a shutdown
+  /// racing the next frame) must stop that solve, and is never lost.
+  void requestCancel() noexcept;
+  /// Withdraws the request, so that later solves run. The caller decides
+  /// when: e.g. the thread that calls solve(), after a cancelled solve
+  /// returned and before the next one, to cancel one frame only. A request
+  /// that arrives after this call stops the next solve; one withdrawn while
+  /// a solve runs may already have stopped it (see its report).
+  void clearCancel() noexcept;
+  /// True while a request is pending (requestCancel() without clearCancel()).
+  bool cancelRequested() const noexcept;
+
+  /// Bytes of memory the solver's own buffers hold (prepared levels,
+  /// iteration state, scratch; not the caller's SolverState).
+  std::size_t bytesHeld() const;
 
  private:
   std::unique_ptr<SolverImpl> impl_;
@@ -139,7 +191,7 @@ void validateProblem(const FusionProblem& problem);
 PlanarImage computeEdgeWeights(const ColorImage& image,
                                const EdgeWeightSettings& settings);
 
-/// The energy E(n) of ALGORITHM.md for the given normals (need not be unit),
+/// The energy E(n) of docs/algorithm.md for the given normals (need not be unit),
 /// with the problem's inputs prepared as the solver prepares them (orientation,
 /// validity, confidence, hard visibility).
 double computeEnergy(const FusionProblem& problem,

@@ -62,6 +62,10 @@ class TemporalAverage {
   /// settings.frames (0 where it has none).
   int count(int l, int i) const;
 
+  /// Bytes of memory the averages hold (frames of a much smaller size than
+  /// before give the larger buffers' memory back: PlanarImage::resize()).
+  std::size_t bytesHeld() const;
+
  private:
   struct History {
     NormalMap average;  ///< per pixel, in the input's own frame

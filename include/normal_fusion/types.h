@@ -46,8 +46,17 @@ class PlanarImage {
   PlanarImage() = default;
   PlanarImage(int width, int height, int channels, float fill = 0.0f);
 
-  /// Reallocates only when the size changes; contents are then unspecified.
+  /// Sets the size; contents are then unspecified. Reallocates when the new
+  /// size exceeds the capacity, and when it is below a quarter of it: a
+  /// buffer sized for a much larger frame gives its memory back. The same
+  /// size never reallocates (a stream of frames of one size allocates once).
   void resize(int width, int height, int channels);
+  /// The same, but never gives memory back: for a buffer that smaller sizes
+  /// reuse in turn (the levels of one pyramid), sized for the largest of them
+  /// by resize() first.
+  void resizeKeepingCapacity(int width, int height, int channels);
+  /// Bytes of memory the buffer holds (its capacity, not its size).
+  std::size_t bytesHeld() const { return data_.capacity() * sizeof(float); }
   void fill(float value);
 
   int width() const { return width_; }

@@ -146,6 +146,15 @@ void exponentialWeightRow(int W, float scale, float w_min,
 
 namespace internal {
 
+std::size_t EdgeWeightScratch::bytesHeld() const {
+  std::size_t bytes = 0;
+  for (const std::vector<float>* v :
+       {&mag_h, &mag_v, &plane, &blurred, &blur, &kernel}) {
+    bytes += internal::bytesHeld(*v);
+  }
+  return bytes;
+}
+
 void computeEdgeWeightsInto(const ColorImage& image,
                             const EdgeWeightSettings& settings,
                             PlanarImage& weights, EdgeWeightScratch& scratch,

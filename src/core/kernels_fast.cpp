@@ -290,7 +290,7 @@ void primalRow(const PreparedLevel& level, const InnerParams& prm,
 
 }  // namespace
 
-void runInnerFast(const PreparedLevel& level, const InnerParams& params,
+bool runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations) {
   // Temporal blocking with a pipeline of threads. One iteration is a sweep
   // over the rows doing dual(y) then primal(y) in place: dual(y) reads nbar
@@ -301,7 +301,12 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
   // that stays in its cache, and thread t+1 runs the next `depth` iterations
   // one row behind thread t. Memory traffic per iteration drops by about the
   // depth, and the result is the same as sweep after sweep.
-  if (iterations <= 0) return;
+  //
+  // A stop request (params.cancel) is read before each row step and in
+  // every wait: the thread that sees it first latches `stopped`, and every
+  // thread leaves its sweeps where they are (no thread then waits for one
+  // that left).
+  if (iterations <= 0) return true;
   const int W = level.width;
   const int H = level.height;
   const int threads = std::max(1, std::min(params.num_threads, iterations));
@@ -318,6 +323,15 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
     progress[t].store(0, std::memory_order_relaxed);
   const int per_round = threads * depth;
   const int rounds = (iterations + per_round - 1) / per_round;
+  std::atomic<bool> stopped{false};
+  auto stop = [&stopped, cancel = params.cancel] {
+    if (stopped.load(std::memory_order_relaxed)) return true;
+    if (!stopRequested(cancel)) return false;
+    // Latched: a request withdrawn now does not leave a thread waiting for
+    // one that has left.
+    stopped.store(true, std::memory_order_relaxed);
+    return true;
+  };
 
 #pragma omp parallel num_threads(threads)
   {
@@ -325,7 +339,9 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
     float* scratch =
         state.row_scratch.data() + static_cast<std::size_t>(t) * 3 * W;
     int remaining = iterations;
-    for (int round = 0; round < rounds; ++round) {
+    // False once the thread stopped on the request: it skips the rest.
+    bool running = true;
+    for (int round = 0; round < rounds && running; ++round) {
       // Iterations of this round, split as evenly as possible over threads.
       const int in_round = std::min(per_round, remaining);
       remaining -= in_round;
@@ -339,25 +355,33 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
       if (mine == 0) {
         // Nothing to do: pass the predecessor's progress on.
         if (must_wait) {
-          while (progress[pred].load(std::memory_order_acquire) <
-                 pred_base + H) {
+          while (running && progress[pred].load(std::memory_order_acquire) <
+                                pred_base + H) {
+            running = !stop();
             std::this_thread::yield();
           }
         }
+        if (!running) break;
         progress[t].store(static_cast<long>(round + 1) * H,
                           std::memory_order_release);
         continue;
       }
-      for (int step = 0; step < H + mine - 1; ++step) {
+      for (int step = 0; step < H + mine - 1 && running; ++step) {
+        running = !stop();
         // The first iteration processes row `step`: wait until the
         // predecessor's last iteration has finished row step + 1.
-        if (must_wait && step < H) {
+        if (running && must_wait && step < H) {
           const long needed = pred_base + std::min(step + 2, H);
           int spins = 0;
-          while (progress[pred].load(std::memory_order_acquire) < needed) {
-            if (++spins > 64) std::this_thread::yield();
+          while (running &&
+                 progress[pred].load(std::memory_order_acquire) < needed) {
+            if (++spins > 64) {
+              running = !stop();
+              std::this_thread::yield();
+            }
           }
         }
+        if (!running) break;
         for (int i = 0; i < mine; ++i) {
           const int y = step - i;
           if (y < 0 || y >= H) continue;
@@ -372,6 +396,7 @@ void runInnerFast(const PreparedLevel& level, const InnerParams& params,
       }
     }
   }
+  return !stopped.load(std::memory_order_relaxed);
 }
 
 namespace {
@@ -452,7 +477,7 @@ NF_MULTIVERSION void primalUpdateIndexed(
 
 }  // namespace
 
-void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
+bool runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
                         ActiveBuffers& b, int iterations) {
   const int P = b.num_active, L = b.num_inputs;
   const float sigma_eps = prm.sigma * prm.huber_eps;
@@ -462,6 +487,15 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
   const int threads = P >= kMinActivePerThread ? prm.num_threads : 1;
   auto update = prm.soft_visibility ? primalUpdateIndexed<true>
                                     : primalUpdateIndexed<false>;
+  // The stop request, read before the first iteration, then by thread 0
+  // before each iteration's last barrier and acted on by every thread after
+  // it (the same decision for all: none is left at a barrier). Written again
+  // only after the next iteration's first barrier, when every thread has
+  // read it.
+  if (iterations <= 0) return true;
+  bool stop = stopRequested(prm.cancel);
+  if (stop) return false;
+  int done = iterations;
 #pragma omp parallel num_threads(threads)
   {
     // Each thread: a fixed share of the links and of the pixels.
@@ -540,9 +574,15 @@ void runInnerActiveFast(const PreparedLevel& level, const InnerParams& prm,
              b.ray[2].data() + k0, b.n[0].data() + k0, b.n[1].data() + k0,
              b.n[2].data() + k0, nb[0].data() + k0, nb[1].data() + k0,
              nb[2].data() + k0);
+      if (t == 0) stop = stopRequested(prm.cancel);
 #pragma omp barrier
+      if (stop && it + 1 < iterations) {
+        if (t == 0) done = it + 1;
+        break;
+      }
     }
   }
+  return done == iterations;
 }
 
 namespace {

@@ -9,12 +9,36 @@ namespace normal_fusion {
 namespace internal {
 
 void IterationState::resize(int width, int height, int num_inputs) {
-  for (PlanarImage* image :
-       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
-    image->resize(width, height, 3);
+  for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v}) {
+    image->resizeKeepingCapacity(width, height, 3);
   }
   q.resize(num_inputs);
-  for (PlanarImage& q_l : q) q_l.resize(width, height, 3);
+  for (PlanarImage& q_l : q) q_l.resizeKeepingCapacity(width, height, 3);
+}
+
+void IterationState::fit(int width, int height, int threads) {
+  // Release only (allocating here would be memory the levels may not
+  // need, and time a cancelled solve could not give back).
+  const std::size_t values = static_cast<std::size_t>(3) * width * height;
+  for (PlanarImage* image :
+       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
+    releaseIfOversized(*image, values);
+  }
+  for (PlanarImage& q_l : q) releaseIfOversized(q_l, values);
+  // The fast backend's rows: three per thread.
+  releaseIfOversized(row_scratch,
+                     static_cast<std::size_t>(3) * width * threads);
+}
+
+std::size_t IterationState::bytesHeld() const {
+  std::size_t bytes = 0;
+  for (const PlanarImage* image :
+       {&n0, &n, &nbar, &p_h, &p_v, &grad_h, &grad_v, &div, &q_sum}) {
+    bytes += image->bytesHeld();
+  }
+  for (const PlanarImage& q_l : q) bytes += q_l.bytesHeld();
+  return bytes + internal::bytesHeld(row_scratch) +
+         internal::bytesHeld(progress);
 }
 
 namespace reference {
@@ -150,10 +174,17 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
 
 }  // namespace reference
 
-void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& s, int iterations) {
   const std::size_t N = s.n.pixelCount();
+  // Scratch of the level's size (allocated once per size: the finest level
+  // sets the capacity that the coarser ones reuse).
+  for (PlanarImage* image : {&s.grad_h, &s.grad_v, &s.div, &s.q_sum}) {
+    image->resizeKeepingCapacity(s.n.width(), s.n.height(), 3);
+  }
   for (int it = 0; it < iterations; ++it) {
+    // A stop request ends the run between iterations.
+    if (stopRequested(params.cancel)) return false;
     // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d
     // nbar).
     reference::gradient(s.nbar, s.grad_h, s.grad_v);
@@ -178,6 +209,7 @@ void runInnerReference(const PreparedLevel& level, const InnerParams& params,
     reference::divergence(s.p_h, s.p_v, s.div);
     reference::primalStep(level, params, s.div, s.q_sum, s.n0, s.n, s.nbar);
   }
+  return true;
 }
 
 }  // namespace internal

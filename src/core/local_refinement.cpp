@@ -22,13 +22,26 @@ void ActiveSet::preallocate(int W, int H) {
   const std::size_t N = static_cast<std::size_t>(W) * H;
   width = W;
   height = H;
+  // Buffers of a much larger image give their memory back.
+  releaseIfOversized(mask, N);
+  releaseIfOversized(scratch, N);
   mask.assign(N, 0);
   scratch.assign(N, 0);
   // Every entry written once (then cleared): the pages exist from now on.
   for (auto* list : {&pixels, &links_h, &links_v, &links_up, &links_down}) {
+    releaseIfOversized(*list, N);
     list->assign(N, 0);
     list->clear();
   }
+}
+
+std::size_t ActiveSet::bytesHeld() const {
+  std::size_t bytes = internal::bytesHeld(mask) + internal::bytesHeld(scratch);
+  for (const auto* list :
+       {&pixels, &links_h, &links_v, &links_up, &links_down}) {
+    bytes += internal::bytesHeld(*list);
+  }
+  return bytes;
 }
 
 void ActiveSet::build(const std::vector<unsigned char>& seed, int W, int H,
@@ -101,7 +114,7 @@ inline void linkDualStep(const PlanarImage& nbar, PlanarImage& p, float w,
 
 }  // namespace
 
-void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+bool runInnerActive(const PreparedLevel& level, const InnerParams& params,
                     IterationState& s, const ActiveSet& active,
                     int iterations) {
   const int W = level.width, H = level.height;
@@ -110,8 +123,17 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
   const long num_px = static_cast<long>(active.pixels.size());
   const float* w_h = level.edge_weight.plane(0);
   const float* w_v = level.edge_weight.plane(1);
+  // The stop request, read by one thread before each iteration (the single
+  // construct's barrier then gives every thread the same decision).
+  bool stop = false;
 #pragma omp parallel num_threads(params.num_threads)
   for (int it = 0; it < iterations; ++it) {
+    // A stop request ends the run before the iteration.
+#pragma omp single
+    stop = stopRequested(params.cancel);
+    if (stop) {
+      break;
+    }
     // Dual ascent on the smoothness terms of the links that touch an active
     // pixel: p_d <- prox(p_d + sigma grad_d nbar).
 #pragma omp for schedule(static) nowait
@@ -169,6 +191,7 @@ void runInnerActive(const PreparedLevel& level, const InnerParams& params,
       }
     }
   }
+  return !stop;
 }
 
 namespace {
@@ -202,6 +225,23 @@ void ActiveBuffers::preallocate(int W, int H, int L, int active) {
   growTo(block_sums, (links + kEnergyBlock - 1) / kEnergyBlock +
                          L * ((P + kEnergyBlock - 1) / kEnergyBlock));
   for (auto* list : {&left_link, &above_link}) growTo(*list, P);
+}
+
+std::size_t ActiveBuffers::bytesHeld() const {
+  std::size_t bytes =
+      internal::bytesHeld(node_pixel) + internal::bytesHeld(node_of) +
+      internal::bytesHeld(q) + internal::bytesHeld(f) + internal::bytesHeld(c) +
+      internal::bytesHeld(delta) + internal::bytesHeld(left_link) +
+      internal::bytesHeld(above_link) + internal::bytesHeld(link_a) +
+      internal::bytesHeld(link_b) + internal::bytesHeld(link_pixel) +
+      internal::bytesHeld(link_w) + internal::bytesHeld(block_sums);
+  for (int ch = 0; ch < 3; ++ch) {
+    for (const auto* v :
+         {&nbar[ch], &n[ch], &n0[ch], &ray[ch], &p[ch], &d[ch], &node_n[ch]}) {
+      bytes += internal::bytesHeld(*v);
+    }
+  }
+  return bytes;
 }
 
 void ActiveBuffers::gather(const PreparedLevel& level, const IterationState& s,
@@ -543,7 +583,8 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
                        std::vector<unsigned char>& filled,
-                       std::vector<int>& pending, int threads) {
+                       std::vector<int>& pending, int threads,
+                       const std::atomic<bool>* cancel) {
   const int W = level.width, H = level.height;
   // The unknown pixels, in ascending order; each pass visits only those left.
   pending.clear();
@@ -555,7 +596,9 @@ void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
   // 4-neighbour (known before this pass) takes its best candidate. Within a
   // pass, pixels read only known ones and write only themselves (in
   // parallel); they become known after it.
-  for (int pass = 0; pass < max_passes && !pending.empty(); ++pass) {
+  for (int pass = 0;
+       pass < max_passes && !pending.empty() && !stopRequested(cancel);
+       ++pass) {
     const long count = static_cast<long>(pending.size());
     long filled_now = 0;
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(+ : filled_now)

@@ -4,6 +4,7 @@
 #include "normal_fusion/solver.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -93,7 +94,7 @@ NF_MULTIVERSION void convertInputRow(
     const bool usable = (s > 1e-12f) & (s < 1e30f);
     // Clamped to [0, 1]; NaN and infinities count as 0.
     float conf = kHasConfidence ? confidence[x] : 1.0f;
-    conf = (conf >= 0.0f) & (conf <= kFloatMax) ? std::min(conf, 1.0f) : 0.0f;
+    conf = ((conf >= 0.0f) & (conf <= kFloatMax)) ? std::min(conf, 1.0f) : 0.0f;
     const float ox = M[0] * ix + M[1] * iy + M[2] * iz;
     const float oy = M[3] * ix + M[4] * iy + M[5] * iz;
     const float oz = M[6] * ix + M[7] * iy + M[8] * iz;
@@ -117,9 +118,10 @@ bool usesDataHuber(const SolverSettings& settings) {
 
 }  // namespace
 
-void prepareFinestInto(const FusionProblem& problem,
+bool prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
-                       EdgeWeightScratch& scratch, int threads) {
+                       EdgeWeightScratch& scratch, int threads,
+                       const std::atomic<bool>* cancel) {
   validateProblem(problem);
   const int W = problem.image.width(), H = problem.image.height();
   level.width = W;
@@ -130,6 +132,8 @@ void prepareFinestInto(const FusionProblem& problem,
   level.problem_image = &problem.image;
   computeEdgeWeightsInto(problem.image, settings.edges, level.edge_weight,
                          scratch, threads);
+  // A stop request is read between the steps (each one pass or a few).
+  if (stopRequested(cancel)) return false;
   level.data.resize(level.num_inputs);
   level.data_weight.resize(level.num_inputs);
   for (int l = 0; l < level.num_inputs; ++l) {
@@ -138,6 +142,7 @@ void prepareFinestInto(const FusionProblem& problem,
   }
   const bool hard = settings.visibility == VisibilityMode::kHard;
   for (int l = 0; l < level.num_inputs; ++l) {
+    if (stopRequested(cancel)) return false;
     const NormalInput& input = problem.inputs[l];
     float M[9];
     for (int k = 0; k < 9; ++k) M[k] = input.orientation.M[k];
@@ -200,6 +205,7 @@ void prepareFinestInto(const FusionProblem& problem,
     valid += count;
   }
   level.valid_pixels = static_cast<int>(valid);
+  if (stopRequested(cancel)) return false;
   if (settings.hole_link_weight < 1.0 && valid < static_cast<long>(W) * H) {
     weakenHoleLinks(level, static_cast<float>(settings.hole_link_weight),
                     threads);
@@ -211,12 +217,23 @@ void prepareFinestInto(const FusionProblem& problem,
   const bool means = settings.warm_refine_iterations > 0;
   level.data_mean.resize(means ? level.num_inputs : 0);
   for (int l = 0; l < level.num_inputs; ++l) {
+    if (stopRequested(cancel)) return false;
     level.data_eps[l].resize(W, H, 1);
     if (means) level.data_mean[l].resize(W, H, 4);
     applyLocalStatistics(settings, level.data[l], level.data_eps[l],
                          level.data_weight[l],
                          means ? &level.data_mean[l] : nullptr, threads);
   }
+  return true;
+}
+
+std::size_t PreparedLevel::bytesHeld() const {
+  std::size_t bytes = edge_weight.bytesHeld() + image.bytesHeld();
+  for (const std::vector<PlanarImage>* images :
+       {&data, &data_weight, &data_eps, &data_mean}) {
+    for (const PlanarImage& i : *images) bytes += i.bytesHeld();
+  }
+  return bytes;
 }
 
 void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
@@ -309,7 +326,7 @@ void localStatisticsRow(int W, int r, int rows, float eps_global,
     // window / count where the density correction applies (c > 0,
     // 0 < n < window), else 1.
     const float applies =
-        (c[x] > 0.0f) & (n > 0.0f) & (n < window) ? 1.0f : 0.0f;
+        ((c[x] > 0.0f) & (n > 0.0f) & (n < window)) ? 1.0f : 0.0f;
     ratio[x] = 1.0f + applies * (window / std::max(n, 1.0f) - 1.0f);
   }
 }
@@ -357,10 +374,11 @@ void applyLocalStatistics(const SolverSettings& settings,
   {
     // Per thread: window sums of f and of the valid count, down the columns
     // (col_*) and then along the row (win_*); grown once, then reused.
+    // (Rows of a much wider image give their memory back.)
     thread_local std::vector<float> scratch;
-    if (scratch.size() < 11 * static_cast<std::size_t>(W)) {
-      scratch.resize(11 * static_cast<std::size_t>(W));
-    }
+    const std::size_t scratch_values = 11 * static_cast<std::size_t>(W);
+    releaseIfOversized(scratch, scratch_values);
+    if (scratch.size() < scratch_values) scratch.resize(scratch_values);
     float* ratio = scratch.data() + 8 * W;
     float* unused_delta = scratch.data() + 9 * W;
     float* spread = scratch.data() + 10 * W;
@@ -524,7 +542,7 @@ void coldNormal(const PreparedLevel& level, VisibilityMode mode, int x, int y,
 
 void initializeCold(const PreparedLevel& level, VisibilityMode mode,
                     PlanarImage& n, int threads) {
-  n.resize(level.width, level.height, 3);
+  n.resizeKeepingCapacity(level.width, level.height, 3);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < level.height; ++y) {
     for (int x = 0; x < level.width; ++x) {
@@ -582,12 +600,14 @@ NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
 }
 
 /// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
-/// normalizes, and projects onto the visible set in soft mode.
+/// normalizes, and projects onto the visible set in soft mode (rows shared by
+/// `threads`).
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
-                     VisibilityMode mode, PlanarImage& n) {
-  n.resize(fine.width, fine.height, 3);
+                     VisibilityMode mode, PlanarImage& n, int threads) {
+  n.resizeKeepingCapacity(fine.width, fine.height, 3);
   const double sx = static_cast<double>(coarse.width()) / fine.width;
   const double sy = static_cast<double>(coarse.height()) / fine.height;
+#pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < fine.height; ++y) {
     const double cy =
         std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), coarse.height() - 1.0);
@@ -625,7 +645,7 @@ void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
 /// n <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
 /// tangent plane).
 void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
-  out.resize(n.width(), n.height(), 3);
+  out.resizeKeepingCapacity(n.width(), n.height(), 3);
   const long N = static_cast<long>(n.pixelCount());
   const float* nx = n.plane(0);
   const float* ny = n.plane(1);
@@ -797,6 +817,13 @@ void SolverState::clear() {
   dual_data.clear();
 }
 
+std::size_t SolverState::bytesHeld() const {
+  std::size_t bytes =
+      normals.bytesHeld() + dual_h.bytesHeld() + dual_v.bytesHeld();
+  for (const PlanarImage& q : dual_data) bytes += q.bytesHeld();
+  return bytes;
+}
+
 namespace {
 
 /// Seconds from `t` to now.
@@ -827,6 +854,7 @@ class SolverImpl {
     threads_ = resolveThreadCount(settings_.num_threads);
     if (refine_threads_.maxThreads() != threads_)
       refine_threads_.reset(threads_);
+    cancelled_ = false;
 
     // Reset the report but keep its vectors' capacity.
     std::vector<double> energies, energy_seconds;
@@ -840,9 +868,21 @@ class SolverImpl {
     report.energies.reserve(settings_.max_outer_iterations + 1);
     report.energy_seconds.reserve(settings_.max_outer_iterations + 1);
 
+    // A request made before the call: nothing is done, `out` is unchanged.
+    if (cancelled()) {
+      finishCancelledBeforeStart(report, start);
+      return;
+    }
     if (levels_.empty()) levels_.resize(1);
-    internal::prepareFinestInto(problem, settings_, levels_[0], edge_scratch_,
-                                threads_);
+    if (!internal::prepareFinestInto(problem, settings_, levels_[0],
+                                     edge_scratch_, threads_,
+                                     &cancel_request_)) {
+      // Stopped while preparing the inputs (here and below, until the
+      // levels start): `out` is unchanged.
+      cancelled_ = true;
+      finishCancelledBeforeStart(report, start);
+      return;
+    }
     const PreparedLevel& finest = levels_[0];
     const int W = finest.width, H = finest.height, L = finest.num_inputs;
     if (finest.valid_pixels == 0) {
@@ -855,6 +895,11 @@ class SolverImpl {
     report.num_inputs = L;
     report.valid_pixels = finest.valid_pixels;
     report.filled_pixels = W * H - finest.valid_pixels;
+    fitBuffers(W, H);
+    if (cancelled()) {
+      finishCancelledBeforeStart(report, start);
+      return;
+    }
 
     const bool use_warm = warm && out.compatible(W, H, L);
     if (warm && !use_warm && has_deadline_) {
@@ -887,7 +932,8 @@ class SolverImpl {
       }
       while (num_levels < wanted &&
              std::min(levels_[num_levels - 1].width,
-                      levels_[num_levels - 1].height) >= 32) {
+                      levels_[num_levels - 1].height) >= 32 &&
+             !cancelled()) {
         if (static_cast<int>(levels_.size()) <= num_levels)
           levels_.emplace_back();
         downsampleInto(levels_[num_levels - 1], settings_, levels_[num_levels],
@@ -895,11 +941,21 @@ class SolverImpl {
         ++num_levels;
       }
     }
+    releaseUnusedLevels(num_levels);
     report.pyramid_levels = num_levels;
+    if (cancelled()) {
+      finishCancelledBeforeStart(report, start);
+      return;
+    }
     report.prepare_seconds = secondsSince(start);
 
+    // Cancelled from here on, the finest level still sets up its start
+    // (cheap: a pass or two, no iterations), so that `out` receives unit
+    // normals of the problem's size.
     IterationState& s = state_;
     for (int li = num_levels - 1; li >= 0; --li) {
+      // Cancelled: the finest level starts from the last level that ran.
+      if (li > 0 && li + 1 < num_levels && cancelled()) continue;
       const PreparedLevel& level = levels_[li];
       s.resize(level.width, level.height, level.num_inputs);
       const bool finest_level = li == 0;
@@ -915,7 +971,9 @@ class SolverImpl {
         for (int l = 0; l < L; ++l) std::swap(s.q[l], out.dual_data[l]);
         // Pixels whose warm normal the current inputs contradict (content
         // that changed or moved unlike the warp assumed) count as unknown.
-        if (settings_.warm_refine_iterations > 0) {
+        const bool refine =
+            settings_.warm_refine_iterations > 0 && !cancelled();
+        if (refine) {
           report.inconsistent_pixels = internal::markInconsistentPixels(
               level, s.n0, settings_.local_radius, unknown_, threads_);
           // The edges of the warm map: seeds of the refinement too (their
@@ -924,7 +982,7 @@ class SolverImpl {
           report.edge_pixels = internal::markMapEdges(
               s.n0, unknown_, edge_scratch_map_, threads_);
         }
-        if (settings_.warm_refine_iterations > 0 &&
+        if (refine && !cancelled() &&
             std::any_of(unknown_.begin(), unknown_.end(),
                         [](unsigned char u) { return u != 0; })) {
           active_.build(unknown_, W, H, settings_.warm_refine_radius);
@@ -932,12 +990,15 @@ class SolverImpl {
           // other seeds, 2, keep their warm normals); then the active pixels
           // are refined. unknown_ now says: known.
           for (unsigned char& u : unknown_) u = u == 1 ? 0 : 1;
-          internal::fillUnknownPixels(
-              level, settings_.huber_eps, settings_.penalty,
-              settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
-              active_, kFillPasses, edge_scratch_map_, fill_pending_, threads_);
+          if (!cancelled()) {
+            internal::fillUnknownPixels(
+                level, settings_.huber_eps, settings_.penalty,
+                settings_.visibility == VisibilityMode::kSoft, s.n0, unknown_,
+                active_, kFillPasses, edge_scratch_map_, fill_pending_,
+                threads_, &cancel_request_);
+          }
           report.warm_start_seconds = secondsSince(warm_start);
-          refineActive(level, s, report);
+          if (!cancelled()) refineActive(level, s, report);
           report.refine_seconds =
               secondsSince(warm_start) - report.warm_start_seconds;
         } else {
@@ -945,7 +1006,8 @@ class SolverImpl {
         }
       } else {
         if (li + 1 < num_levels) {
-          upsampleNormals(coarse_result_, level, settings_.visibility, s.n0);
+          upsampleNormals(coarse_result_, level, settings_.visibility, s.n0,
+                          threads_);
         } else {
           initializeCold(level, settings_.visibility, s.n0, threads_);
         }
@@ -953,8 +1015,10 @@ class SolverImpl {
         s.p_v.fill(0.0f);
         for (PlanarImage& q : s.q) q.fill(0.0f);
       }
-      if (finest_level && use_warm && settings_.warm_refine_iterations > 0 &&
-          has_deadline_) {
+      if (cancelled()) {
+        // Stopped: no iterations (the start stands).
+      } else if (finest_level && use_warm &&
+                 settings_.warm_refine_iterations > 0 && has_deadline_) {
         // Live (a time budget and the local refinement): the frame's time
         // goes to the refinement, and the frame ends when it does. The
         // whole-image steps after it gained nothing where measured
@@ -977,12 +1041,15 @@ class SolverImpl {
     // swapped out (the state's old buffers become the next solve's scratch).
     // The state's buffers are sized first, so that the iteration state keeps
     // sized buffers: a first solve into an empty state allocates here, not
-    // the next (warm) frame.
-    out.normals.resize(W, H, 3);
-    out.dual_h.resize(W, H, 3);
-    out.dual_v.resize(W, H, 3);
+    // the next (warm) frame. (Not when cancelled: the next solve sizes
+    // them.)
     out.dual_data.resize(L);
-    for (PlanarImage& q : out.dual_data) q.resize(W, H, 3);
+    if (!cancelled_) {
+      out.normals.resize(W, H, 3);
+      out.dual_h.resize(W, H, 3);
+      out.dual_v.resize(W, H, 3);
+      for (PlanarImage& q : out.dual_data) q.resize(W, H, 3);
+    }
     std::swap(out.normals, s.n0);
     std::swap(out.dual_h, s.p_h);
     std::swap(out.dual_v, s.p_v);
@@ -993,10 +1060,92 @@ class SolverImpl {
     } else {
       report.final_energy = report.energies.back();
     }
+    report.cancelled = cancelled_;
     report.seconds = secondsSince(start);
   }
 
+  /// Solver::bytesHeld().
+  std::size_t bytesHeld() const {
+    std::size_t bytes = state_.bytesHeld() + candidate_.bytesHeld() +
+                        coarse_result_.bytesHeld() + edge_scratch_.bytesHeld() +
+                        active_.bytesHeld() + active_buffers_.bytesHeld() +
+                        internal::bytesHeld(edge_scratch_map_) +
+                        internal::bytesHeld(fill_pending_) +
+                        internal::bytesHeld(unknown_) +
+                        internal::bytesHeld(n_saved_);
+    for (const PreparedLevel& level : levels_) bytes += level.bytesHeld();
+    return bytes;
+  }
+
+  /// Solver::requestCancel(): set by the caller (any thread), read by the
+  /// solve, never cleared by it.
+  std::atomic<bool> cancel_request_{false};
+  static_assert(std::atomic<bool>::is_always_lock_free,
+                "requestCancel() must be a lock-free store (signal handlers)");
+
  private:
+  /// True once this solve has seen the cancel request (latched for the rest
+  /// of the solve, so that a request withdrawn meanwhile does not undo what
+  /// it stopped).
+  bool cancelled() {
+    if (!cancelled_ && cancel_request_.load(std::memory_order_relaxed)) {
+      cancelled_ = true;
+    }
+    return cancelled_;
+  }
+
+  /// The report of a solve cancelled before its levels started (no
+  /// iterations, no energies, the state untouched).
+  void finishCancelledBeforeStart(SolveReport& report,
+                                  Clock::time_point start) const {
+    report.cancelled = true;
+    report.initial_energy = report.final_energy =
+        std::numeric_limits<double>::quiet_NaN();
+    report.prepare_seconds = report.seconds = secondsSince(start);
+  }
+
+  /// Gives back the memory of the buffers that every level of a solve
+  /// shares, and of those of the warm start, when they were sized for a much
+  /// larger image than this one (W x H): more than 4 times what it
+  /// needs (PlanarImage::resize()'s rule; the same size never reallocates).
+  /// The finest level's own buffers follow the rule as they are prepared.
+  void fitBuffers(int W, int H) {
+    const std::size_t N = static_cast<std::size_t>(W) * H;
+    state_.fit(W, H, threads_);
+    internal::releaseIfOversized(candidate_, 3 * N);
+    internal::releaseIfOversized(coarse_result_, 3 * N);
+    for (std::vector<float>* v :
+         {&edge_scratch_.mag_h, &edge_scratch_.mag_v, &edge_scratch_.plane,
+          &edge_scratch_.blurred, &edge_scratch_.blur}) {
+      internal::releaseIfOversized(*v, N);
+    }
+    internal::releaseIfOversized(unknown_, N);
+    internal::releaseIfOversized(edge_scratch_map_, N);
+    internal::releaseIfOversized(fill_pending_, N);
+    internal::releaseIfOversized(n_saved_, 3 * N);
+    // The refinement's buffers hold room for up to every pixel of the image
+    // they were sized for (ActiveSet: its mask, one entry per pixel).
+    if (N < active_.mask.capacity() / 4) active_ = internal::ActiveSet();
+    if (N < active_buffers_.node_of.capacity() / 4) {
+      active_buffers_ = internal::ActiveBuffers();
+    }
+  }
+
+  /// Releases the pyramid levels past `used` that a much larger image left:
+  /// more than 4 times the pixels this image's level of that depth has. (A
+  /// stream of one size keeps its cold start's levels for the next one.)
+  void releaseUnusedLevels(int used) {
+    int w = levels_[0].width, h = levels_[0].height;
+    for (int li = 1; li < static_cast<int>(levels_.size()); ++li) {
+      w = (w + 1) / 2;
+      h = (h + 1) / 2;
+      if (li < used) continue;
+      const long pixels =
+          static_cast<long>(levels_[li].width) * levels_[li].height;
+      if (pixels / 4 > static_cast<long>(w) * h) levels_[li] = PreparedLevel();
+    }
+  }
+
   IterationState state_;
   PlanarImage candidate_;
   std::vector<unsigned char> edge_scratch_map_;  ///< markMapEdges(), fill
@@ -1007,7 +1156,9 @@ class SolverImpl {
   double level_seconds_ = 0.0;  ///< least cost of the finest level, measured
   std::vector<float>
       n_saved_;  ///< reference refinement: iterate while normalized
-  std::vector<PreparedLevel> levels_;  ///< finest first; grown, never shrunk
+  /// Finest first; grown (releaseUnusedLevels() frees what a larger image
+  /// left).
+  std::vector<PreparedLevel> levels_;
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
   Clock::time_point deadline_;
@@ -1020,6 +1171,7 @@ class SolverImpl {
 
  private:
   bool has_deadline_ = false;
+  bool cancelled_ = false;  ///< cancelled(): this solve saw the request
   int threads_ = 1;
   int remaining_inner_ = 0;
   /// The local refinement's thread count per step (kept across frames).
@@ -1070,6 +1222,7 @@ class SolverImpl {
     params.soft_visibility = settings_.visibility == VisibilityMode::kSoft;
     params.num_threads = threads_;
     params.block_depth = kBlockDepth;
+    params.cancel = &cancel_request_;
     return params;
   }
 
@@ -1112,7 +1265,9 @@ class SolverImpl {
     }
     int remaining = settings_.warm_refine_iterations;
     double step_seconds = 0.0;  // what the last outer step took
-    while (remaining > 0) {
+    // A cancel request ends it before a step, or inside one (the step is
+    // then dropped: n0 holds the last accepted one).
+    while (remaining > 0 && !cancelled()) {
       const Clock::time_point step_start = Clock::now();
       const int k = std::min(kRefineStepIterations, remaining);
       // One thread or all: whichever the last steps found cheaper (the same
@@ -1134,16 +1289,24 @@ class SolverImpl {
         report.budget_exhausted = true;
         break;
       }
+      // Inner iterations, then the candidate n / |n| at the active pixels and
+      // its local terms of E.
+      double e = 0.0;
+      InnerParams step_params = params;
+      step_params.num_threads = step_threads;
+      const bool ran =
+          reference ? internal::runInnerActive(level, params, s, active_, k)
+                    : internal::runInnerActiveFast(level, step_params, b, k);
+      if (!ran) {
+        cancelled_ = true;
+        break;
+      }
       remaining -= k;
       report.refine_iterations += k;
       if (step_threads < threads_) {
         report.refine_single_thread_iterations += k;
       }
-      // Inner iterations, then the candidate n / |n| at the active pixels and
-      // its local terms of E.
-      double e = 0.0;
       if (reference) {
-        internal::runInnerActive(level, params, s, active_, k);
         for (long j = 0; j < count; ++j) {
           const int i = pixels[j];
           float* n[3] = {s.n.plane(0) + i, s.n.plane(1) + i, s.n.plane(2) + i};
@@ -1157,9 +1320,6 @@ class SolverImpl {
         e = internal::energyActive(level, settings_.huber_eps,
                                    settings_.penalty, s.n, active_, threads_);
       } else {
-        InnerParams step_params = params;
-        step_params.num_threads = step_threads;
-        internal::runInnerActiveFast(level, step_params, b, k);
         b.normalizeCandidate();
         e = b.energy(settings_.huber_eps, settings_.penalty, step_threads);
       }
@@ -1267,10 +1427,14 @@ class SolverImpl {
           k = std::min(k, 4 * threads_ * kBlockDepth);
         }
         const Clock::time_point chunk_start = Clock::now();
-        if (settings_.backend == SolverBackend::kReference) {
-          internal::runInnerReference(level, params, s, k);
-        } else {
-          internal::runInnerFast(level, params, s, k);
+        // A cancel request stops the iterations inside the chunk (its
+        // iterate is then dropped: n0 is the last accepted step).
+        const bool ran = settings_.backend == SolverBackend::kReference
+                             ? internal::runInnerReference(level, params, s, k)
+                             : internal::runInnerFast(level, params, s, k);
+        if (!ran) {
+          cancelled_ = true;
+          break;
         }
         seconds_per_iteration = secondsSince(chunk_start) / k;
         done += k;
@@ -1282,6 +1446,12 @@ class SolverImpl {
           out_of_time = true;
           break;
         }
+      }
+      if (cancelled()) {
+        // Only whole chunks count; the outer step is not closed.
+        (finest ? report.inner_iterations : report.coarse_inner_iterations) +=
+            done;
+        break;
       }
       remaining -= done;
       if (finest) {
@@ -1348,6 +1518,20 @@ SolveReport Solver::solve(const FusionProblem& problem, SolverState& state,
   impl_->solve(problem, state, warm_start, report);
   return report;
 }
+
+void Solver::requestCancel() noexcept {
+  impl_->cancel_request_.store(true, std::memory_order_relaxed);
+}
+
+void Solver::clearCancel() noexcept {
+  impl_->cancel_request_.store(false, std::memory_order_relaxed);
+}
+
+bool Solver::cancelRequested() const noexcept {
+  return impl_->cancel_request_.load(std::memory_order_relaxed);
+}
+
+std::size_t Solver::bytesHeld() const { return impl_->bytesHeld(); }
 
 void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {
   impl_->budget_start_ = frame_start;

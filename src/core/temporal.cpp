@@ -26,6 +26,15 @@ void TemporalAverage::reset() {
   for (History& history : histories_) history.count.fill(0.0f);
 }
 
+std::size_t TemporalAverage::bytesHeld() const {
+  std::size_t bytes = 0;
+  for (const History& h : histories_) {
+    bytes += h.average.bytesHeld() + h.count.bytesHeld() +
+             h.scratch_average.bytesHeld() + h.scratch_count.bytesHeld();
+  }
+  return bytes;
+}
+
 int TemporalAverage::count(int l, int i) const {
   if (l < 0 || l >= static_cast<int>(histories_.size())) return 0;
   const ScalarMap& count = histories_[l].count;
@@ -70,6 +79,12 @@ void TemporalAverage::apply(std::vector<NormalInput>& inputs,
       h.average.resize(W, H, 3);
       h.count.resize(W, H, 1);
       h.count.fill(0.0f);
+      // The carry's scratch follows (a much larger one gives its memory
+      // back now, not only when the next carry sizes it).
+      if (!h.scratch_average.empty()) {
+        h.scratch_average.resize(W, H, 3);
+        h.scratch_count.resize(W, H, 1);
+      }
     }
     // The rotation in the input's frame: the solver reads n_optical = M
     // n_input, so an input-frame vector turns by M^T R M.

@@ -13,13 +13,35 @@ PlanarImage::PlanarImage(int width, int height, int channels, float fill) {
   this->fill(fill);
 }
 
-void PlanarImage::resize(int width, int height, int channels) {
+namespace {
+
+/// Throws InputError for a negative size.
+void checkSize(int width, int height, int channels) {
   if (width < 0 || height < 0 || channels < 0) {
     std::ostringstream msg;
     msg << "PlanarImage: negative size " << width << "x" << height << "x"
         << channels;
     throw InputError(msg.str());
   }
+}
+
+}  // namespace
+
+void PlanarImage::resize(int width, int height, int channels) {
+  checkSize(width, height, channels);
+  const std::size_t values =
+      static_cast<std::size_t>(width) * height * channels;
+  if (values < data_.capacity() / 4) {
+    // Sized for a much larger image: a buffer of the new size replaces it
+    // (a vector keeps its capacity when it shrinks).
+    std::vector<float, AlignedAllocator<float>> smaller(values);
+    data_.swap(smaller);
+  }
+  resizeKeepingCapacity(width, height, channels);
+}
+
+void PlanarImage::resizeKeepingCapacity(int width, int height, int channels) {
+  checkSize(width, height, channels);
   width_ = width;
   height_ = height;
   channels_ = channels;

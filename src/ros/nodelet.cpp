@@ -133,6 +133,9 @@ NormalFusionNodelet::~NormalFusionNodelet() {
     std::lock_guard<std::mutex> lock(work_mutex_);
     stop_ = true;
   }
+  // A solve under way stops within an inner iteration block, so that the
+  // process ends before roslaunch escalates to SIGTERM and SIGKILL.
+  if (pipeline_) pipeline_->requestCancel();
   work_cv_.notify_all();
   if (worker_.joinable()) worker_.join();
   timer_.stop();
@@ -551,6 +554,8 @@ void NormalFusionNodelet::workerLoop() {
       recordError(text.str());
       logThrottled(true, text.str());
       continue;
+    } catch (const Cancelled&) {
+      return;  // shutting down
     } catch (const std::exception& e) {
       ++frames_skipped_;
       recordError(e.what());

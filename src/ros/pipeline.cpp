@@ -448,6 +448,7 @@ void FusionPipeline::process(const InputSet& set,
             std::chrono::duration<double>(encode_estimate_s_));
     solver_.setBudgetStart(started - reserve);
     solver_.solve(problem_, state_, warm || stream_start, report_);
+    if (report_.cancelled) throw Cancelled(topics_.image + ": solve cancelled");
     // The warp's buffers, sized with the state (allocates on the first frame
     // of a size only).
     warp_scratch_.resize(state_.normals.width(), state_.normals.height(),

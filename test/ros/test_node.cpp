@@ -15,7 +15,10 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <xmlrpcpp/XmlRpc.h>
 
+#include <signal.h>
+
 #include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -291,24 +294,34 @@ TEST(Node, LaunchedLiveHasTheLiveOverlay) {
 /// The process that runs the node (~process_node: the nodelet manager, or
 /// the standalone node) has the launch file's OMP_WAIT_POLICY, passive by
 /// default: its pid from the node's XML-RPC API, its environment from /proc.
+/// The pid of the process that runs a node, from its XML-RPC API (-1 when
+/// unknown).
+int pidOfNode(const std::string& node) {
+  XmlRpc::XmlRpcValue args, result, payload;
+  args[0] = ros::this_node::getName();
+  args[1] = node;
+  if (!ros::master::execute("lookupNode", args, result, payload, true)) {
+    return -1;
+  }
+  std::string host, uri = static_cast<std::string>(payload);
+  std::uint32_t port = 0;
+  if (!ros::network::splitURI(uri, host, port)) return -1;
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue pid_args, pid_result;
+  pid_args[0] = ros::this_node::getName();
+  if (!client.execute("getPid", pid_args, pid_result) ||
+      static_cast<int>(pid_result[0]) != 1) {
+    return -1;
+  }
+  return static_cast<int>(pid_result[2]);
+}
+
 TEST(Node, RunsWithTheLaunchFilesWaitPolicy) {
   if (compareMode()) GTEST_SKIP();
   std::string process_node;
   ASSERT_TRUE(ros::NodeHandle("~").getParam("process_node", process_node));
-  XmlRpc::XmlRpcValue args, result, payload;
-  args[0] = ros::this_node::getName();
-  args[1] = process_node;
-  ASSERT_TRUE(ros::master::execute("lookupNode", args, result, payload, true))
-      << process_node;
-  std::string host, uri = static_cast<std::string>(payload);
-  std::uint32_t port = 0;
-  ASSERT_TRUE(ros::network::splitURI(uri, host, port)) << uri;
-  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
-  XmlRpc::XmlRpcValue pid_args, pid_result;
-  pid_args[0] = ros::this_node::getName();
-  ASSERT_TRUE(client.execute("getPid", pid_args, pid_result)) << uri;
-  ASSERT_EQ(static_cast<int>(pid_result[0]), 1) << uri;
-  const int pid = static_cast<int>(pid_result[2]);
+  const int pid = pidOfNode(process_node);
+  ASSERT_GT(pid, 0) << process_node;
   std::ifstream environ("/proc/" + std::to_string(pid) + "/environ",
                         std::ios::binary);
   ASSERT_TRUE(environ.good()) << pid;
@@ -317,6 +330,61 @@ TEST(Node, RunsWithTheLaunchFilesWaitPolicy) {
     if (entry.rfind("OMP_WAIT_POLICY=", 0) == 0) policy = entry.substr(16);
   }
   EXPECT_EQ(policy, "passive") << process_node << " (pid " << pid << ")";
+}
+
+/// SIGINT (what roslaunch sends first) while the node solves a 1920x1440
+/// frame: the process ends promptly, long before the solve would have.
+/// Run alone (shutdown_*.test): the node is gone afterwards.
+TEST(Shutdown, SigintDuringALargeSolveEndsTheProcessPromptly) {
+  std::string process_node;
+  ASSERT_TRUE(ros::NodeHandle("~").getParam("process_node", process_node));
+  NodeClient client("");
+  client.listen(false, false, true);
+  ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 10.0));
+  const int pid = pidOfNode(process_node);
+  ASSERT_GT(pid, 0) << process_node;
+  // A cold solve of this size takes many seconds (1000 inner iterations).
+  const auto big =
+      nf::test::noisyFrame(nf::synthetic::renderScene(0, 1920, 1440), 23);
+  const std_msgs::Header header = makeHeader(newStamp());
+  NodeClient::FrameMessages m;
+  m.image = imageMessage(big.frame.image, header);
+  m.info = cameraInfoMessage(big.frame.K, 1920, 1440, header);
+  m.normals[0] = normalsMessage(big.noisy, header);
+  m.normals[1] = normalsMessage(big.from_depth, header);
+  client.publish(m);
+  // Wait until the worker is busy: the process takes more than a core.
+  auto cpuTicks = [&] {
+    std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+    std::string field;
+    for (int k = 0; k < 13 && stat >> field; ++k) {
+    }
+    long utime = 0, stime = 0;
+    stat >> utime >> stime;
+    return utime + stime;
+  };
+  ros::WallDuration(2.0).sleep();
+  const long before = cpuTicks();
+  ros::WallDuration(0.5).sleep();
+  const long busy = cpuTicks() - before;
+  EXPECT_GT(busy, 10) << "the node is not solving";  // ticks of 10 ms
+  ASSERT_FALSE(client.stats(header.stamp)) << "the solve already finished";
+  const ros::WallTime sent = ros::WallTime::now();
+  ASSERT_EQ(kill(pid, SIGINT), 0);
+  double ended = -1.0;
+  while ((ros::WallTime::now() - sent).toSec() < 30.0) {
+    // A zombie (exited, not yet reaped by roslaunch) counts as ended.
+    std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+    std::string pid_text, comm, state;
+    if (!(stat >> pid_text >> comm >> state) || state == "Z") {
+      ended = (ros::WallTime::now() - sent).toSec();
+      break;
+    }
+    ros::WallDuration(0.01).sleep();
+  }
+  ASSERT_GE(ended, 0.0) << "still running 30 s after SIGINT";
+  std::printf("%s ended %.3f s after SIGINT\n", process_node.c_str(), ended);
+  EXPECT_LT(ended, 1.0) << process_node;
 }
 
 /// The node's statuses on /diagnostics, newest first per name.

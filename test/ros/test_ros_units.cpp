@@ -1193,6 +1193,39 @@ TEST(Pipeline, BadInputThrowsAndTheNextGoodSetIsAnswered) {
     set.normals[0] = normalsMessage(nan, makeHeader(1.0));
     bad.emplace_back("normals_0", set);
   }
+  {
+    InputSet set = fixture.setFor(f, 1.0);
+    auto info = boost::make_shared<sensor_msgs::CameraInfo>(*set.camera_info);
+    info->header.frame_id = "elsewhere";
+    set.camera_info = info;
+    bad.emplace_back("camera_info: frame_id 'elsewhere'", set);
+  }
+  {
+    // A confidence in another frame (the pipeline reads it when
+    // use_confidence_0 is set).
+    InputSet set = fixture.setFor(f, 1.0);
+    sensor_msgs::ImagePtr confidence = boost::make_shared<sensor_msgs::Image>();
+    confidence->header = makeHeader(1.0, "elsewhere");
+    confidence->encoding = "32FC1";
+    confidence->width = 64;
+    confidence->height = 48;
+    confidence->step = 64 * 4;
+    confidence->data.assign(confidence->step * 48, 0);
+    set.confidence[0] = confidence;
+    bad.emplace_back("confidence_0: frame_id 'elsewhere'", set);
+  }
+  {
+    InputSet set = fixture.setFor(f, 1.0);
+    auto image = boost::make_shared<sensor_msgs::Image>(*set.image);
+    image->width = 1;
+    image->step = 3;
+    image->data.assign(3 * image->height, 0);
+    set.image = image;
+    bad.emplace_back("image: expected at least 2x2 pixels, got 1x48", set);
+  }
+  NodeSettings with_confidence = fixture.settings;
+  with_confidence.inputs[0].use_confidence = true;
+  pipeline.setSettings(with_confidence);
   for (const auto& entry : bad) {
     try {
       pipeline.process(entry.second, nullptr, false, &out);

@@ -14,6 +14,25 @@
 namespace normal_fusion {
 namespace internal {
 
+/// Bytes of memory a vector holds (its capacity, not its size).
+template <typename T, typename A>
+std::size_t bytesHeld(const std::vector<T, A>& v) {
+  return v.capacity() * sizeof(T);
+}
+
+/// Gives back the memory of a vector sized for a much larger image: room
+/// for more than 4 times the `values` it needs now (PlanarImage::resize()'s
+/// rule). Its contents are then gone.
+template <typename T, typename A>
+void releaseIfOversized(std::vector<T, A>& v, std::size_t values) {
+  if (values < v.capacity() / 4) std::vector<T, A>().swap(v);
+}
+
+/// The same for an image (`values`: floats, all planes).
+inline void releaseIfOversized(PlanarImage& image, std::size_t values) {
+  if (values < image.bytesHeld() / sizeof(float) / 4) image = PlanarImage();
+}
+
 /// A problem after input preparation, at one pyramid level: everything the
 /// inner iterations read and never write.
 struct PreparedLevel {
@@ -45,6 +64,9 @@ struct PreparedLevel {
   }
   int valid_pixels = 0;
 
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
+
   /// Ray r(x, y) = K^-1 (x, y, 1)^T of a pixel (not normalized).
   void ray(int x, int y, float r[3]) const {
     r[0] = static_cast<float>(K_inv[0] * x + K_inv[1] * y + K_inv[2]);
@@ -63,7 +85,16 @@ struct InnerParams {
   bool soft_visibility = false;
   int num_threads = 1;
   int block_depth = 6;  ///< iterations per thread per sweep (fast backend)
+  /// Stop request (Solver::requestCancel()), or null: none. The kernels
+  /// read it between rows (fast backend) or iterations and return early
+  /// once it is set.
+  const std::atomic<bool>* cancel = nullptr;
 };
+
+/// True when a stop request is set (`cancel` may be null: none).
+inline bool stopRequested(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
 
 /// Variables of the primal-dual iteration (allocated once per size).
 struct IterationState {
@@ -73,14 +104,23 @@ struct IterationState {
   PlanarImage p_h;   ///< dual of the horizontal differences, 3 planes
   PlanarImage p_v;   ///< dual of the vertical differences, 3 planes
   std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
-  // Scratch of the reference backend: gradients, divergence, data-dual sum.
+  // Scratch of the reference backend: gradients, divergence, data-dual sum
+  // (sized by runInnerReference(), so the fast backend holds none).
   PlanarImage grad_h, grad_v, div, q_sum;
   // Scratch of the fast backend: three rows per thread, and each thread's
   // progress through the rows (the temporal-blocking pipeline).
   std::vector<float> row_scratch;
   std::vector<std::atomic<long>> progress;
 
+  /// Sizes every buffer for one level of a solve, keeping the capacity (the
+  /// pyramid's levels reuse the finest level's buffers).
   void resize(int width, int height, int num_inputs);
+  /// Before the levels of a solve whose finest level is W x H with
+  /// `threads` threads: releases the buffers sized for a much larger image
+  /// (releaseIfOversized()); the levels then size what they use.
+  void fit(int width, int height, int threads);
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// The pixels of a local refinement and the links that touch them. Buffers
@@ -105,13 +145,18 @@ struct ActiveSet {
   /// Sizes the buffers for a W x H image (written once).
   void preallocate(int width, int height);
   bool empty() const { return pixels.empty(); }
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// Runs `iterations` Chambolle-Pock iterations of the subproblem on the
 /// active pixels, every other pixel held at n (= nbar = n0 there): the duals
 /// of the links that touch an active pixel, the data duals and the primal
 /// step at active pixels, each the reference backend's per-pixel step.
-void runInnerActive(const PreparedLevel& level, const InnerParams& params,
+/// Returns false when params.cancel stopped it before the last iteration
+/// (read before each one; n and nbar are then those of an unfinished
+/// iteration, and only n0 and the duals are to be used).
+bool runInnerActive(const PreparedLevel& level, const InnerParams& params,
                     IterationState& state, const ActiveSet& active,
                     int iterations);
 
@@ -131,13 +176,14 @@ void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
 /// their normal.
 /// `filled` and `pending` are scratch (grown to the unknown pixels' count;
 /// reserve them once for a stream without allocations); `threads` share
-/// each pass.
+/// each pass. A set `cancel` (read before each pass) ends it early.
 void fillUnknownPixels(const PreparedLevel& level, double huber_eps,
                        DataPenalty penalty, bool soft, PlanarImage& normals,
                        std::vector<unsigned char>& known,
                        const ActiveSet& active, int max_passes,
                        std::vector<unsigned char>& filled,
-                       std::vector<int>& pending, int threads);
+                       std::vector<int>& pending, int threads,
+                       const std::atomic<bool>* cancel = nullptr);
 
 /// The variables of a local refinement gathered into contiguous arrays, one
 /// array per component (the fast path of runInnerActive()). Nodes are the
@@ -201,6 +247,8 @@ struct ActiveBuffers {
   /// Writes n0 (into state.n0) and the duals of the links and data terms
   /// back, with `threads`.
   void scatter(IterationState& state, int threads = 1) const;
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// Picks the thread count of the local refinement's steps from their
@@ -241,8 +289,9 @@ class RefineThreadChooser {
 };
 
 /// runInnerActive() on gathered buffers: the same steps on contiguous
-/// arrays, vectorised, on up to params.num_threads threads.
-void runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
+/// arrays, vectorised, on up to params.num_threads threads. Returns false
+/// when params.cancel stopped it (as runInnerActive()).
+bool runInnerActiveFast(const PreparedLevel& level, const InnerParams& params,
                         ActiveBuffers& buffers, int iterations);
 
 /// Angle between a warm start's normal and an input's window mean, beyond
@@ -277,10 +326,15 @@ double energyActive(const PreparedLevel& level, double huber_eps,
 
 /// Runs `iterations` Chambolle-Pock iterations on the tangent plane at n0.
 /// Reference backend: one plain function per step of the maths.
-void runInnerReference(const PreparedLevel& level, const InnerParams& params,
+/// Both return false when params.cancel stopped them before the last
+/// iteration ended: read before each iteration (reference) or each row
+/// (fast; its threads then leave their sweeps where they are). n and nbar
+/// are then those of an unfinished iteration, to be dropped; the duals are
+/// each the result of a whole step (finite, feasible), n0 is untouched.
+bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
                        IterationState& state, int iterations);
 /// Fast backend: fused per-pixel passes, multithreaded.
-void runInnerFast(const PreparedLevel& level, const InnerParams& params,
+bool runInnerFast(const PreparedLevel& level, const InnerParams& params,
                   IterationState& state, int iterations);
 
 /// huber_eps(z) = z^2 / (2 eps) below eps, z - eps / 2 above (eps = 0: z).
@@ -383,6 +437,8 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
 /// Buffers of the edge-weight computation, reused from frame to frame.
 struct EdgeWeightScratch {
   std::vector<float> mag_h, mag_v, plane, blurred, blur, kernel;
+  /// Bytes of memory its buffers hold.
+  std::size_t bytesHeld() const;
 };
 
 /// computeEdgeWeights() into reused buffers, with `threads` threads.
@@ -398,10 +454,13 @@ void computeEdgeWeightsInto(const ColorImage& image,
 /// terms' Huber thresholds and the edge weights (weakened inside holes).
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
-/// The same into reused buffers, with `threads` threads.
-void prepareFinestInto(const FusionProblem& problem,
+/// The same into reused buffers, with `threads` threads. Returns false when
+/// a set `cancel` (read between its steps) stopped it: the level is then
+/// incomplete (not to be solved on).
+bool prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
-                       EdgeWeightScratch& scratch, int threads);
+                       EdgeWeightScratch& scratch, int threads,
+                       const std::atomic<bool>* cancel = nullptr);
 
 /// Multiplies the edge weights of the links between two pixels that no input
 /// observes by `factor` (SolverSettings::hole_link_weight).
@@ -425,7 +484,7 @@ double energyFast(const PreparedLevel& level, double huber_eps,
                   DataPenalty penalty, const PlanarImage& normals,
                   int num_threads);
 
-/// E(n) of ALGORITHM.md on a prepared level (double accumulation).
+/// E(n) of docs/algorithm.md on a prepared level (double accumulation).
 double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
               const PlanarImage& normals, int num_threads);
 

@@ -129,6 +129,10 @@ class FusionPipeline {
   /// Forgets the previous frame: the next set cold-starts.
   void resetWarmStart();
 
+  /// From any thread: the solve under way (and every later one) stops within
+  /// an inner iteration block; process() then throws Cancelled. For shutdown.
+  void requestCancel() noexcept { solver_.requestCancel(); }
+
   std::uint64_t framesProcessed() const { return frames_processed_; }
   const SolveReport& lastReport() const { return report_; }
   /// The fused normals of the last set (valid after process()).
