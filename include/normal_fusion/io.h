@@ -28,6 +28,16 @@ ScalarMap readScalarMap(const std::string& path);
 /// Writes a one-plane float map (.exr or .pfm by extension). Throws InputError.
 void writeScalarMap(const std::string& path, const ScalarMap& values);
 
+/// Reads a depth image into metres (REP 118 units): 16-bit unsigned (PNG)
+/// in millimetres with 0 = no depth, or float (.exr, .pfm) in metres with
+/// NaN, 0, negative and infinite values = no depth; NaN where missing.
+/// Throws InputError for another pixel type or more than one channel.
+ScalarMap readDepthMap(const std::string& path);
+/// Writes a depth map in metres: .png as 16-bit millimetres (rounded; no
+/// depth and values beyond 65.535 m as 0), .exr / .pfm as float metres (NaN
+/// kept). Throws InputError.
+void writeDepthMap(const std::string& path, const ScalarMap& depth_m);
+
 /// Colour coding of a normal map: 3 planes R, G, B in [0, 1], black where
 /// missing.
 ColorImage colorCode(const NormalMap& normals);

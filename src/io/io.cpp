@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,7 @@
 #include <sstream>
 #include <vector>
 
+#include "normal_fusion/depth.h"
 #include "normal_fusion/errors.h"
 
 namespace normal_fusion {
@@ -320,6 +322,59 @@ ScalarMap readScalarMap(const std::string& path) {
 void writeScalarMap(const std::string& path, const ScalarMap& values) {
   checkFloatMap(path, values, 1, "scalar map");
   writeFloatPlanes(path, values);
+}
+
+ScalarMap readDepthMap(const std::string& path) {
+  const cv::Mat mat = readUnchanged(path);
+  if (mat.channels() != 1) {
+    fail(path, "expected a single-channel depth image, found " +
+                   std::to_string(mat.channels()) + " channels");
+  }
+  ScalarMap depth_m;
+  if (mat.depth() == CV_16U) {
+    // REP 118 16UC1: millimetres, 0 = no depth.
+    depth::depthFromMillimetres(mat.data, mat.cols, mat.rows, mat.step[0],
+                                depth_m);
+  } else if (mat.depth() == CV_32F || mat.depth() == CV_64F ||
+             mat.depth() == CV_16F) {
+    // REP 118 32FC1: metres; NaN, 0, negative, infinite = no depth.
+    cv::Mat mat_f;
+    mat.convertTo(mat_f, CV_32F);
+    depth::depthFromMetres(mat_f.data, mat_f.cols, mat_f.rows, mat_f.step[0],
+                           depth_m);
+  } else {
+    fail(path,
+         "expected a 16-bit depth image in millimetres or a float one in "
+         "metres, found " +
+             depthName(mat.depth()));
+  }
+  return depth_m;
+}
+
+void writeDepthMap(const std::string& path, const ScalarMap& depth_m) {
+  if (depth_m.empty() || depth_m.channels() != 1) {
+    fail(path, "expected a non-empty depth map with 1 plane to write");
+  }
+  if (isFloatExtension(path)) {
+    writeFloatPlanes(path, depth_m);
+    return;
+  }
+  if (lowerExtension(path) != ".png") {
+    fail(path,
+         "expected the extension .png (16-bit millimetres), .exr or "
+         ".pfm (float metres) for a depth map, found '" +
+             lowerExtension(path) + "'");
+  }
+  cv::Mat mm(depth_m.height(), depth_m.width(), CV_16UC1);
+  for (int y = 0; y < depth_m.height(); ++y) {
+    auto* row = mm.ptr<std::uint16_t>(y);
+    for (int x = 0; x < depth_m.width(); ++x) {
+      // Metres to rounded millimetres; no depth (or out of range) = 0.
+      const double v = std::round(depth_m.at(0, y, x) * 1000.0);
+      row[x] = v >= 1.0 && v <= 65535.0 ? static_cast<std::uint16_t>(v) : 0;
+    }
+  }
+  writeMat(path, mm);
 }
 
 ColorImage colorCode(const NormalMap& normals) {
