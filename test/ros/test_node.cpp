@@ -949,6 +949,47 @@ TEST(Node, DescriptionCarriesEveryNumericRange) {
   EXPECT_EQ(shown["edge_w_min"], std::make_pair(0.0, 1.0));
 }
 
+/// The node's dynamic_reconfigure service: reads the configuration when made,
+/// sets values, and puts the configuration back when it goes.
+class Reconfigure {
+ public:
+  Reconfigure() : service_(nodeName() + "/set_parameters") {
+    ok_ = ros::service::waitForService(service_, 5000) &&
+          ros::service::call(service_, original_);
+  }
+  ~Reconfigure() {
+    dynamic_reconfigure::Reconfigure restore;
+    restore.request.config = original_.response.config;
+    EXPECT_TRUE(ros::service::call(service_, restore));
+  }
+  bool ok() const { return ok_; }
+  /// Sends one value; returns the configuration the node answers with.
+  dynamic_reconfigure::Config set(const std::string& name, double value) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::DoubleParameter p;
+    p.name = name;
+    p.value = value;
+    srv.request.config.doubles.push_back(p);
+    EXPECT_TRUE(ros::service::call(service_, srv)) << name;
+    return srv.response.config;
+  }
+  dynamic_reconfigure::Config set(const std::string& name,
+                                  const std::string& value) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::StrParameter p;
+    p.name = name;
+    p.value = value;
+    srv.request.config.strs.push_back(p);
+    EXPECT_TRUE(ros::service::call(service_, srv)) << name;
+    return srv.response.config;
+  }
+
+ private:
+  std::string service_;
+  dynamic_reconfigure::Reconfigure original_;
+  bool ok_ = false;
+};
+
 /// The configuration as a map name -> value text, for comparisons.
 std::map<std::string, std::string> configValues(
     const dynamic_reconfigure::Config& config) {
@@ -973,18 +1014,10 @@ TEST(Node, AnInvalidReconfigureValueLeavesEveryOtherSetting) {
   LogCollector logs;
   client.listen(false, false, true);
   ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
-  const std::string service = nodeName() + "/set_parameters";
-  ASSERT_TRUE(ros::service::waitForService(service, 5000));
-  dynamic_reconfigure::Reconfigure original;
-  ASSERT_TRUE(ros::service::call(service, original));
+  Reconfigure reconfigure;
+  ASSERT_TRUE(reconfigure.ok());
   auto set = [&](const std::string& name, double value) {
-    dynamic_reconfigure::Reconfigure srv;
-    dynamic_reconfigure::DoubleParameter d;
-    d.name = name;
-    d.value = value;
-    srv.request.config.doubles.push_back(d);
-    EXPECT_TRUE(ros::service::call(service, srv)) << name;
-    return srv.response.config;
+    return reconfigure.set(name, value);
   };
   // A live stream's budget first.
   const auto live = configValues(set("time_budget_ms", 33.0));
@@ -1024,9 +1057,6 @@ TEST(Node, AnInvalidReconfigureValueLeavesEveryOtherSetting) {
     const auto m = client.messagesFor(sceneFrame(), newStamp());
     ASSERT_TRUE(answered(client, m, 10.0)) << "no output with " << name;
   }
-  dynamic_reconfigure::Reconfigure restore;
-  restore.request.config = original.response.config;
-  ASSERT_TRUE(ros::service::call(service, restore));
 }
 
 /// fixed_frame naming a frame that tf does not know: the warning names the
@@ -1037,16 +1067,9 @@ TEST(Node, AnUnknownFixedFrameIsNamedInTheWarning) {
   LogCollector logs;
   client.listen(false, false, true);
   ASSERT_TRUE(waitFor([&] { return client.inputSubscribers() == 4; }, 5.0));
-  const std::string service = nodeName() + "/set_parameters";
-  ASSERT_TRUE(ros::service::waitForService(service, 5000));
-  dynamic_reconfigure::Reconfigure original;
-  ASSERT_TRUE(ros::service::call(service, original));
-  dynamic_reconfigure::Reconfigure srv;
-  dynamic_reconfigure::StrParameter frame;
-  frame.name = "fixed_frame";
-  frame.value = "no_such_frame";
-  srv.request.config.strs.push_back(frame);
-  ASSERT_TRUE(ros::service::call(service, srv));
+  Reconfigure reconfigure;
+  ASSERT_TRUE(reconfigure.ok());
+  reconfigure.set("fixed_frame", std::string("no_such_frame"));
   for (int k = 0; k < 3; ++k) {
     EXPECT_TRUE(answered(client, client.messagesFor(sceneFrame(), newStamp())));
   }
@@ -1056,9 +1079,6 @@ TEST(Node, AnUnknownFixedFrameIsNamedInTheWarning) {
                          {"fixed_frame 'no_such_frame'"});
       },
       2.0));
-  dynamic_reconfigure::Reconfigure restore;
-  restore.request.config = original.response.config;
-  ASSERT_TRUE(ros::service::call(service, restore));
 }
 
 TEST(Node, RotationCompensatedWarmStartAndInputAveragesWithTf) {
