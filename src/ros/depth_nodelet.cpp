@@ -2,7 +2,6 @@
 
 #include <pluginlib/class_list_macros.hpp>
 
-#include <cctype>
 #include <cstring>
 #include <sstream>
 
@@ -10,22 +9,6 @@
 
 namespace normal_fusion {
 namespace node {
-namespace {
-
-constexpr double kLogPeriodS = 5.0;
-
-/// The text without its numbers: one throttling key per kind of message.
-std::string withoutDigits(const std::string& text) {
-  std::string key;
-  for (char c : text) {
-    if (!std::isdigit(static_cast<unsigned char>(c)) && c != '.' && c != '-') {
-      key += c;
-    }
-  }
-  return key;
-}
-
-}  // namespace
 
 DepthNodeSettings depthSettingsFromParameters(
     const ros::NodeHandle& pnh, std::vector<std::string>* warnings) {
@@ -362,17 +345,7 @@ void DepthToNormalsNodelet::process(const Work& work) {
 }
 
 void DepthToNormalsNodelet::logThrottled(const std::string& text) {
-  const std::string key = withoutDigits(text);
-  const ros::WallTime now = ros::WallTime::now();
-  {
-    std::lock_guard<std::mutex> lock(log_mutex_);
-    auto it = last_logged_.find(key);
-    if (it != last_logged_.end() && (now - it->second).toSec() < kLogPeriodS) {
-      return;
-    }
-    last_logged_[key] = now;
-    if (last_logged_.size() > 1000) last_logged_.clear();
-  }
+  if (!log_throttle_.admit(text)) return;
   NODELET_ERROR("%s", text.c_str());
 }
 

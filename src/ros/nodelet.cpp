@@ -5,7 +5,6 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include <algorithm>
-#include <cctype>
 #include <cstdlib>
 #include <sstream>
 #include <type_traits>
@@ -17,7 +16,6 @@ namespace normal_fusion {
 namespace node {
 namespace {
 
-constexpr double kLogPeriodS = 5.0;
 // Diagnostics: this many errors within the window is ERROR, fewer WARN.
 constexpr double kErrorWindowS = 5.0;
 constexpr int kRepeatedErrors = 3;
@@ -114,16 +112,6 @@ void writeConfigMessage(const ParameterMap& params,
       p.value = std::get<std::string>(it->second);
     }
   }
-}
-
-std::string withoutDigits(const std::string& text) {
-  std::string key;
-  for (char c : text) {
-    if (!std::isdigit(static_cast<unsigned char>(c)) && c != '.' && c != '-') {
-      key += c;
-    }
-  }
-  return key;
 }
 
 }  // namespace
@@ -601,17 +589,7 @@ void NormalFusionNodelet::recordError(const std::string& text) {
 }
 
 void NormalFusionNodelet::logThrottled(bool is_error, const std::string& text) {
-  const std::string key = withoutDigits(text);
-  const ros::WallTime now = ros::WallTime::now();
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    auto it = last_logged_.find(key);
-    if (it != last_logged_.end() && (now - it->second).toSec() < kLogPeriodS) {
-      return;
-    }
-    last_logged_[key] = now;
-    if (last_logged_.size() > 1000) last_logged_.clear();
-  }
+  if (!log_throttle_.admit(text)) return;
   if (is_error) {
     NODELET_ERROR("%s", text.c_str());
   } else {
@@ -668,14 +646,7 @@ void NormalFusionNodelet::checkMissingInputs() {
       }
     }
   }
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    auto it = last_logged_.find("missing");
-    if (it != last_logged_.end() && (now - it->second).toSec() < timeout) {
-      return;
-    }
-    last_logged_["missing"] = now;
-  }
+  if (!log_throttle_.admitKey("missing", timeout)) return;
   NODELET_WARN("%s", text.str().c_str());
 }
 

@@ -20,6 +20,7 @@
 
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/synthetic.h"
+#include "ros_test_util.h"
 
 namespace nf = normal_fusion;
 
@@ -59,20 +60,6 @@ sensor_msgs::ImagePtr depthMessage(const nf::ScalarMap& depth_m,
       std::memcpy(&msg->data[4 * i], &z, 4);
     }
   }
-  return msg;
-}
-
-sensor_msgs::CameraInfoPtr infoMessage(const nf::CameraIntrinsics& K,
-                                       const std_msgs::Header& header) {
-  auto msg = boost::make_shared<sensor_msgs::CameraInfo>();
-  msg->header = header;
-  msg->width = kWidth;
-  msg->height = kHeight;
-  msg->distortion_model = "plumb_bob";
-  msg->D.assign(5, 0.0);
-  for (int i = 0; i < 9; ++i) msg->K[i] = K.K[i];
-  msg->R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  msg->P = {K.K[0], 0, K.K[2], 0, 0, K.K[4], K.K[5], 0, 0, 0, 1, 0};
   return msg;
 }
 
@@ -176,7 +163,7 @@ std_msgs::Header newHeader() {
 Client::Frame goodFrame(bool millimetres = true) {
   const std_msgs::Header h = newHeader();
   return {depthMessage(scene().depth, h, millimetres),
-          infoMessage(scene().K, h)};
+          nf::test::cameraInfoMessage(scene().K, kWidth, kHeight, h)};
 }
 
 nf::NormalMap normalsOf(const sensor_msgs::Image& msg) {
@@ -436,8 +423,9 @@ TEST(Rgbd, DepthNormalsAreFusedGuidedByTheImage) {
         }
       }
     }
-    info_pub.publish(infoMessage(f.K, h));
-    depth_info_pub.publish(infoMessage(f.K, h));
+    info_pub.publish(nf::test::cameraInfoMessage(f.K, kWidth, kHeight, h));
+    depth_info_pub.publish(
+        nf::test::cameraInfoMessage(f.K, kWidth, kHeight, h));
     depth_pub.publish(depthMessage(f.depth, h, true));
     image_pub.publish(image);
     waitFor(

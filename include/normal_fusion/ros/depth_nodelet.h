@@ -23,6 +23,7 @@
 
 #include "normal_fusion/depth.h"
 #include "normal_fusion/ros/conversions.h"
+#include "normal_fusion/ros/log_throttle.h"
 #include "normal_fusion/ros/pipeline.h"
 #include "normal_fusion/ros/synchronizer.h"
 
@@ -107,8 +108,7 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
   NormalMap normals_;
   ScalarMap confidence_;
 
-  std::mutex log_mutex_;
-  std::map<std::string, ros::WallTime> last_logged_;
+  LogThrottle log_throttle_{5.0};
   std::atomic<std::uint64_t> frames_skipped_{0};
 };
 

@@ -27,6 +27,7 @@
 #include <thread>
 #include <vector>
 
+#include "normal_fusion/ros/log_throttle.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/ros/pipeline.h"
 #include "normal_fusion/ros/synchronizer.h"
@@ -119,7 +120,7 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   std::atomic<std::uint64_t> frames_processed_{0};
   std::mutex stats_mutex_;
   std::string last_error_;
-  std::map<std::string, ros::WallTime> last_logged_;
+  LogThrottle log_throttle_{5.0};
   ros::WallTime last_error_time_;
   std::deque<std::pair<ros::WallTime, double>> recent_outputs_;  ///< latency
   std::deque<ros::WallTime> recent_errors_;
