@@ -6,12 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <sstream>
 
-#include "normal_fusion/detail/previous_pixel.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
-#include "normal_fusion/warp.h"
 
 namespace normal_fusion {
 namespace node {
@@ -168,21 +165,6 @@ void requireImageFrame(const std_msgs::Header& header,
                    "'; expected " + what + " in the image's camera frame");
 }
 
-/// The number of pixels of `normals` that are not finite unit vectors.
-std::size_t nonUnitPixels(const NormalMap& normals) {
-  std::size_t bad = 0;
-  const std::size_t n = normals.pixelCount();
-  const float* x = normals.plane(0);
-  const float* y = normals.plane(1);
-  const float* z = normals.plane(2);
-  for (std::size_t i = 0; i < n; ++i) {
-    const float length2 = x[i] * x[i] + y[i] * y[i] + z[i] * z[i];
-    // NaN fails the comparison and counts as bad.
-    bad += !(std::abs(length2 - 1.0f) <= 1e-3f);
-  }
-  return bad;
-}
-
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
       .count();
@@ -192,7 +174,9 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
 
 FusionPipeline::FusionPipeline(const NodeSettings& settings,
                                const TopicNames& topics)
-    : settings_(settings), topics_(topics), solver_(settings.solver) {
+    : settings_(settings),
+      topics_(topics),
+      fuser_(streamSettingsFrom(settings), topics.image) {
   const int L = settings_.num_inputs;
   if (static_cast<int>(topics_.normals.size()) < L ||
       static_cast<int>(topics_.confidence.size()) < L) {
@@ -216,76 +200,27 @@ void FusionPipeline::setSettings(const NodeSettings& settings) {
                          std::to_string(settings_.num_inputs) + ", got " +
                          std::to_string(settings.num_inputs));
   }
-  solver_.setSettings(settings.solver);
+  fuser_.setSettings(streamSettingsFrom(settings));
   settings_ = settings;
 }
 
-void FusionPipeline::resetWarmStart() {
-  has_previous_ = false;
-  state_.clear();
-  temporal_.reset();
-  averages_current_ = false;
+void FusionPipeline::resetWarmStart() { fuser_.reset(); }
+
+StreamSettings streamSettingsFrom(const NodeSettings& settings) {
+  StreamSettings stream;
+  stream.solver = settings.solver;
+  stream.warm_start = settings.warm_start;
+  stream.warm_start_max_gap = settings.warm_start_max_gap;
+  stream.temporal = settings.temporal;
+  return stream;
 }
 
-bool FusionPipeline::canWarmStart(const CameraIntrinsics& K,
-                                  const ros::Time& stamp,
-                                  std::string* reason) const {
-  if (!has_previous_) {
-    *reason = "no previous frame";
-    return false;
-  }
-  if (!state_.compatible(problem_.image.width(), problem_.image.height(),
-                         settings_.num_inputs)) {
-    *reason = "the image size changed";
-    return false;
-  }
-  for (int i = 0; i < 9; ++i) {
-    if (std::abs(K.K[i] - previous_K_.K[i]) >
-        1e-9 * std::max(1.0, std::abs(previous_K_.K[i]))) {
-      *reason = "K changed";
-      return false;
-    }
-  }
-  // The gap the previous set's own processing opened does not count: after
-  // a long solve (a stream's converged start) the next set solved is the
-  // newest, its stamp that much later.
-  const double gap = secondsBetween(stamp, previous_stamp_);
-  if (gap > settings_.warm_start_max_gap + previous_seconds_) {
-    std::ostringstream text;
-    text << "stamp gap " << gap << " s exceeds warm_start_max_gap plus the "
-         << "previous set's processing (" << previous_seconds_ << " s)";
-    *reason = text.str();
-    return false;
-  }
-  return true;
-}
-
-void FusionPipeline::process(const InputSet& set,
-                             const RotationLookup& rotation, bool make_vis,
-                             PipelineOutput* output) {
-  const auto started = std::chrono::steady_clock::now();
-  output->warning.clear();
+std::vector<std::uint8_t> FusionPipeline::convertSet(const InputSet& set) {
   // Threads of the inputs' resampling: the solver's (0 = all processors).
   const int conversion_threads =
       resolveThreadCount(settings_.solver.num_threads);
-  if (!set.image) throw InputError(topics_.image + ": no image in the set");
-  if (!set.camera_info) {
-    throw InputError(topics_.camera_info +
-                     ": no camera_info for the image; expected one per image");
-  }
-  const sensor_msgs::Image& image_msg = *set.image;
-  const std::string& frame_id = image_msg.header.frame_id;
-  const ros::Time stamp = image_msg.header.stamp;
-  requireImageFrame(set.camera_info->header, frame_id, topics_.camera_info,
-                    "the camera_info");
-  if (image_msg.width < 2 || image_msg.height < 2) {
-    throw InputError(topics_.image + ": expected at least 2x2 pixels, got " +
-                     std::to_string(image_msg.width) + "x" +
-                     std::to_string(image_msg.height));
-  }
-
-  // Guide image and intrinsics.
-  imageFromMessage(image_msg, topics_.image, problem_.image);
+  const std::string& frame_id = set.image->header.frame_id;
+  imageFromMessage(*set.image, topics_.image, problem_.image);
   const int W = problem_.image.width(), H = problem_.image.height();
   problem_.K =
       intrinsicsFromCameraInfo(*set.camera_info, topics_.camera_info, W, H);
@@ -295,7 +230,6 @@ void FusionPipeline::process(const InputSet& set,
   const int L = settings_.num_inputs;
   problem_.inputs.resize(L);
   std::vector<std::uint8_t> present(L, 0);
-  int present_count = 0;
   for (int i = 0; i < L; ++i) {
     NormalInput& input = problem_.inputs[i];
     const InputSettings& config = settings_.inputs[i];
@@ -341,217 +275,125 @@ void FusionPipeline::process(const InputSet& set,
       input.confidence = ScalarMap();
     }
     present[i] = 1;
-    ++present_count;
   }
-  if (present_count == 0) {
+  return present;
+}
+
+FrameRotation FusionPipeline::rotationFor(const RotationLookup& rotation,
+                                          const std::string& frame_id,
+                                          const ros::Time& stamp) const {
+  if (settings_.fixed_frame.empty()) return FrameRotation::still();
+  std::string unused;
+  if (!(settings_.warm_start || settings_.temporal.enabled()) ||
+      !fuser_.continuesStream(static_cast<std::int64_t>(stamp.toNSec()),
+                              problem_.K, problem_.image.width(),
+                              problem_.image.height(), settings_.num_inputs,
+                              &unused)) {
+    return FrameRotation::still();  // not used: the stream restarts
+  }
+  std::string why;
+  std::array<double, 9> R_cur_prev{};
+  if (!rotation) {
+    why = "no transform source";
+  } else if (frame_id.empty()) {
+    why = "the image has no frame_id";
+  } else {
+    ros::Time previous;
+    previous.fromNSec(static_cast<std::uint64_t>(fuser_.previousStampNs()));
+    if (rotation(frame_id, previous, stamp, &R_cur_prev, &why)) {
+      return FrameRotation::known(R_cur_prev);
+    }
+  }
+  return FrameRotation::unknown(why);
+}
+
+void FusionPipeline::process(const InputSet& set,
+                             const RotationLookup& rotation, bool make_vis,
+                             PipelineOutput* output) {
+  const auto started = std::chrono::steady_clock::now();
+  output->warning.clear();
+  output->note.clear();
+  if (!set.image) throw InputError(topics_.image + ": no image in the set");
+  if (!set.camera_info) {
+    throw InputError(topics_.camera_info +
+                     ": no camera_info for the image; expected one per image");
+  }
+  const sensor_msgs::Image& image_msg = *set.image;
+  requireImageFrame(set.camera_info->header, image_msg.header.frame_id,
+                    topics_.camera_info, "the camera_info");
+  if (image_msg.width < 2 || image_msg.height < 2) {
+    throw InputError(topics_.image + ": expected at least 2x2 pixels, got " +
+                     std::to_string(image_msg.width) + "x" +
+                     std::to_string(image_msg.height));
+  }
+  const std::vector<std::uint8_t> present = convertSet(set);
+  if (std::find(present.begin(), present.end(), 1) == present.end()) {
     throw InputError(topics_.image +
                      ": the set holds no normal map; expected at least one");
   }
 
-  // Warm start: from the previous result when it fits, rotated when asked.
-  bool warm = false, rotated = false;
-  if (has_previous_ && stamp < previous_stamp_) {
-    std::ostringstream text;
-    text << "time went backwards by " << secondsBetween(previous_stamp_, stamp)
-         << " s (a bag loop or a restarted player): warm start reset";
-    output->warning = text.str();
-    resetWarmStart();
+  const ros::Time stamp = image_msg.header.stamp;
+  const FrameRotation frame_rotation =
+      rotationFor(rotation, image_msg.header.frame_id, stamp);
+  StreamResult result;
+  fuser_.fuse(static_cast<std::int64_t>(stamp.toNSec()), problem_,
+              frame_rotation, started, &result);
+  output->warning = result.warning;
+  output->note = result.note;
+  if (result.rotation_failed) {
+    output->warning = "rotation of '" + image_msg.header.frame_id +
+                      "' relative to fixed_frame '" + settings_.fixed_frame +
+                      "' unknown (" + result.rotation_unknown +
+                      "): " + result.rotation_consequence;
   }
-  std::string reason;
-  // A warm start wanted but the previous map unusable (no previous frame,
-  // another size or K, too long a gap): the stream (re)starts here. Its cold
-  // start is solved under cold_start_budget_ms (the solver's rule for a warm
-  // start asked for without a usable state), since the warm frames after it
-  // carry its map on. A rotation that cannot be looked up is a one-frame
-  // failure instead: that frame is cold-started under the frame budget.
-  // The inputs' temporal averages follow the same stream: carried by the
-  // same rotation, restarted where the warm start would be.
-  bool stream_start = false;
-  output->note.clear();
-  const bool averaging = settings_.temporal.enabled();
-  bool continuous = false;  // this set continues the previous set's stream
-  if (settings_.warm_start || averaging) {
-    continuous = canWarmStart(problem_.K, stamp, &reason);
-    if (!continuous && settings_.warm_start) {
-      stream_start = true;
-      state_.clear();
-    }
-  }
-  std::array<double, 9> R_cur_prev{};
-  if (continuous && !settings_.fixed_frame.empty()) {
-    std::string why;
-    if (!rotation) {
-      why = "no transform source";
-    } else if (frame_id.empty()) {
-      why = "the image has no frame_id";
-    } else if (rotation(frame_id, previous_stamp_, stamp, &R_cur_prev, &why)) {
-      try {
-        if (settings_.warm_start) {
-          // With the local refinement the duals are reset (as good, and
-          // cheaper: see DualWarp).
-          warpStateByRotation(state_, problem_.K, R_cur_prev, warp_scratch_,
-                              solver_.settings().num_threads,
-                              solver_.settings().warm_refine_iterations > 0
-                                  ? DualWarp::kReset
-                                  : DualWarp::kRotate);
-        } else {
-          internal::checkRotation(R_cur_prev, "the transform");
-        }
-        rotated = true;
-      } catch (const Error& e) {
-        why = e.what();
-      }
-    }
-    if (!rotated) {
-      output->warning = "rotation of '" + frame_id +
-                        "' relative to fixed_frame '" + settings_.fixed_frame +
-                        "' unknown (" + why + "): ";
-      if (settings_.warm_start) output->warning += "cold start";
-      if (settings_.warm_start && averaging) output->warning += ", ";
-      if (averaging) output->warning += "input averages restarted";
-    }
-  }
-  // Aligned with the previous set: by the rotation, or assumed still when no
-  // fixed_frame is given.
-  const bool aligned = continuous && (settings_.fixed_frame.empty() || rotated);
-  warm = settings_.warm_start && aligned;
-  double average_seconds = 0.0;
-  // This set's samples join the previous sets' averages (else they restart).
-  const bool joined = averaging && aligned && averages_current_;
-  if (averaging) {
-    const auto average_start = std::chrono::steady_clock::now();
-    // A new stream, or averages left from before averaging was last turned
-    // off (stale): they restart with this set.
-    if (!joined) temporal_.reset();
-    try {
-      temporal_.apply(problem_.inputs, problem_.K,
-                      rotated ? &R_cur_prev : nullptr, settings_.temporal,
-                      conversion_threads);
-    } catch (...) {
-      resetWarmStart();
-      throw;
-    }
-    averages_current_ = true;
-    average_seconds = std::chrono::duration<double>(
-                          std::chrono::steady_clock::now() - average_start)
-                          .count();
-  } else {
-    averages_current_ = false;
-  }
-
-  try {
-    // time_budget_ms covers the whole frame: conversion, warp, solve and the
-    // outputs' encoding. The encoding's time (as the last frames took) and
-    // the overrun reserve are set aside by starting the budget that much
-    // earlier.
-    const auto reserve =
-        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-            std::chrono::duration<double>(encode_estimate_s_ +
-                                          overrun_reserve_s_));
-    solver_.setBudgetStart(started - reserve);
-    solver_.solve(problem_, state_, warm || stream_start, report_);
-    if (report_.cancelled) throw Cancelled(topics_.image + ": solve cancelled");
-    // The warp's buffers, sized with the state (allocates on the first frame
-    // of a size only).
-    warp_scratch_.resize(state_.normals.width(), state_.normals.height(),
-                         static_cast<int>(state_.dual_data.size()));
-  } catch (...) {
-    resetWarmStart();
-    throw;
-  }
-  if (stream_start) {
-    std::ostringstream text;
-    text << "stream (re)started (" << reason << "): cold start in "
-         << std::lround(1e3 * report_.seconds) << " ms, "
-         << report_.inner_iterations + report_.coarse_inner_iterations
-         << " inner iterations";
-    if (report_.cold_start_budget_used) {
-      const double budget = solver_.settings().cold_start_budget_ms;
-      text << " under cold_start_budget_ms ";
-      if (budget > 0.0) {
-        text << "(" << budget << " ms)";
-      } else {
-        text << "(none: the iteration caps)";
-      }
-      text << " instead of time_budget_ms ("
-           << solver_.settings().time_budget_ms << " ms)";
-    }
-    output->note = text.str();
-  }
-  const std::size_t bad_pixels = nonUnitPixels(state_.normals);
-  if (bad_pixels > 0) {
-    // Never published: fused_normals promises a unit normal at every pixel.
-    resetWarmStart();
-    std::ostringstream text;
-    text << topics_.image << ": the solve gave " << bad_pixels << " of "
-         << state_.normals.pixelCount()
-         << " pixels without a finite unit normal (K, the inputs or the "
-            "settings are degenerate); frame skipped, stream reset";
-    throw Error(text.str());
-  }
-  has_previous_ = true;
-  previous_stamp_ = stamp;
-  previous_K_ = problem_.K;
-  ++frames_processed_;
-
-  // Outputs with the image's header.
   const auto encode_start = std::chrono::steady_clock::now();
+  encodeOutputs(image_msg.header, make_vis, result, present, output);
+  normal_fusion::FusionStats& stats = *output->stats;
+  stats.encode_time = secondsSince(encode_start);
+  stats.frame_time = fuser_.endFrame(stats.encode_time);
+  stats.latency = stats.frame_time;
+}
+
+void FusionPipeline::encodeOutputs(const std_msgs::Header& header,
+                                   bool make_vis, const StreamResult& result,
+                                   const std::vector<std::uint8_t>& present,
+                                   PipelineOutput* output) const {
+  const NormalMap& fused = fuser_.fusedNormals();
+  const SolveReport& report = fuser_.lastReport();
   output->fused = boost::make_shared<sensor_msgs::Image>();
-  normalsToMessage(state_.normals, image_msg.header, *output->fused);
+  normalsToMessage(fused, header, *output->fused);
   output->fused_vis.reset();
   if (make_vis) {
     output->fused_vis = boost::make_shared<sensor_msgs::Image>();
-    normalsToVisMessage(state_.normals, image_msg.header, *output->fused_vis);
+    normalsToVisMessage(fused, header, *output->fused_vis);
   }
   auto stats = boost::make_shared<normal_fusion::FusionStats>();
-  stats->header = image_msg.header;
-  stats->outer_iterations = report_.outer_iterations;
-  stats->inner_iterations = report_.inner_iterations;
-  stats->coarse_inner_iterations = report_.coarse_inner_iterations;
-  stats->pyramid_levels = report_.pyramid_levels;
-  stats->inconsistent_pixels = report_.inconsistent_pixels;
-  stats->refined_pixels = report_.refined_pixels;
-  stats->refine_iterations = report_.refine_iterations;
-  stats->initial_energy = report_.initial_energy;
-  stats->final_energy = report_.final_energy;
-  stats->solve_time = report_.seconds;
-  stats->prepare_time = report_.prepare_seconds;
-  stats->warm_start_time = report_.warm_start_seconds;
-  stats->refine_time = report_.refine_seconds;
-  stats->cold_start_budget_used = report_.cold_start_budget_used;
-  stats->input_average_time = average_seconds;
-  stats->inputs_averaged = joined;
-  stats->warm_started = report_.warm_started;
-  stats->rotation_compensated = rotated && report_.warm_started;
-  stats->converged = report_.converged;
-  stats->budget_exhausted = report_.budget_exhausted;
+  stats->header = header;
+  stats->outer_iterations = report.outer_iterations;
+  stats->inner_iterations = report.inner_iterations;
+  stats->coarse_inner_iterations = report.coarse_inner_iterations;
+  stats->pyramid_levels = report.pyramid_levels;
+  stats->inconsistent_pixels = report.inconsistent_pixels;
+  stats->refined_pixels = report.refined_pixels;
+  stats->refine_iterations = report.refine_iterations;
+  stats->initial_energy = report.initial_energy;
+  stats->final_energy = report.final_energy;
+  stats->solve_time = report.seconds;
+  stats->prepare_time = report.prepare_seconds;
+  stats->warm_start_time = report.warm_start_seconds;
+  stats->refine_time = report.refine_seconds;
+  stats->cold_start_budget_used = report.cold_start_budget_used;
+  stats->input_average_time = result.average_seconds;
+  stats->inputs_averaged = result.inputs_averaged;
+  stats->warm_started = report.warm_started;
+  stats->rotation_compensated = result.rotated && report.warm_started;
+  stats->converged = report.converged;
+  stats->budget_exhausted = report.budget_exhausted;
   stats->inputs_present.assign(present.begin(), present.end());
-  stats->valid_pixels = report_.valid_pixels;
-  stats->filled_pixels = report_.filled_pixels;
-  stats->frames_processed = frames_processed_;
-  stats->encode_time = secondsSince(encode_start);
-  // A slow running estimate: one frame's hiccup does not halve the next
-  // frame's solve.
-  encode_estimate_s_ = frames_processed_ == 1 ? stats->encode_time
-                                              : 0.8 * encode_estimate_s_ +
-                                                    0.2 * stats->encode_time;
-  stats->frame_time = secondsSince(started);
-  stats->latency = stats->frame_time;
-  stats->budget_reserve = overrun_reserve_s_;
-  previous_seconds_ = stats->frame_time;
-  // The overrun reserve tracks the kBudgetQuantile quantile of the frames'
-  // overruns (a stochastic quantile estimate): up by q steps after a frame
-  // over the budget, down by 1 - q steps after one within, so that about
-  // that share of frames keeps the budget whatever the machine's load.
-  const double budget_s = 1e-3 * solver_.settings().time_budget_ms;
-  if (budget_s > 0.0 && !report_.cold_start_budget_used) {
-    constexpr double kBudgetQuantile = 0.98, kStepS = 1e-3;
-    overrun_reserve_s_ += stats->frame_time > budget_s
-                              ? kStepS * kBudgetQuantile
-                              : -kStepS * (1.0 - kBudgetQuantile);
-    overrun_reserve_s_ =
-        std::min(std::max(overrun_reserve_s_, 0.0), 0.5 * budget_s);
-  }
+  stats->valid_pixels = report.valid_pixels;
+  stats->filled_pixels = report.filled_pixels;
+  stats->frames_processed = fuser_.framesFused();
+  stats->budget_reserve = result.budget_reserve_seconds;
   output->stats = stats;
 }
 

@@ -1,6 +1,8 @@
 // One synchronized set of messages in, the fused map and its statistics out:
-// the part of the node that the nodelet and fuse_bag share. Holds the solver,
-// its warm-start state and the reused buffers; no subscriptions, no threads.
+// the part of the node that the nodelet and fuse_bag share. Converts the
+// messages, looks up the camera's rotation and encodes the outputs; the
+// stream's policy and state are the library's StreamFuser. No subscriptions,
+// no threads.
 #pragma once
 
 #include <normal_fusion/FusionStats.h>
@@ -17,6 +19,7 @@
 #include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/solver.h"
+#include "normal_fusion/stream_fuser.h"
 
 namespace normal_fusion {
 namespace node {
@@ -97,6 +100,10 @@ using RotationLookup =
 RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
                                         const std::string& fixed_frame);
 
+/// The stream settings in `settings` (solver, warm start, temporal
+/// averaging).
+StreamSettings streamSettingsFrom(const NodeSettings& settings);
+
 /// What one processed set gives.
 struct PipelineOutput {
   sensor_msgs::ImagePtr fused;      ///< 32FC3, the image's header
@@ -131,44 +138,35 @@ class FusionPipeline {
 
   /// From any thread: the solve under way (and every later one) stops within
   /// an inner iteration block; process() then throws Cancelled. For shutdown.
-  void requestCancel() noexcept { solver_.requestCancel(); }
+  void requestCancel() noexcept { fuser_.requestCancel(); }
 
-  std::uint64_t framesProcessed() const { return frames_processed_; }
-  const SolveReport& lastReport() const { return report_; }
+  std::uint64_t framesProcessed() const { return fuser_.framesFused(); }
+  const SolveReport& lastReport() const { return fuser_.lastReport(); }
   /// The fused normals of the last set (valid after process()).
-  const NormalMap& fusedNormals() const { return state_.normals; }
+  const NormalMap& fusedNormals() const { return fuser_.fusedNormals(); }
 
  private:
-  /// Whether the previous result can warm-start this frame, and why not.
-  bool canWarmStart(const CameraIntrinsics& K, const ros::Time& stamp,
-                    std::string* reason) const;
+  /// Fills problem_ from the set (guide image, K, the inputs resampled to
+  /// the image); returns which inputs are present.
+  std::vector<std::uint8_t> convertSet(const InputSet& set);
+  /// The camera's rotation since the previous set, looked up only when the
+  /// set continues the stream with a fixed_frame given.
+  FrameRotation rotationFor(const RotationLookup& rotation,
+                            const std::string& frame_id,
+                            const ros::Time& stamp) const;
+  /// Encodes the outputs and fills the statistics.
+  void encodeOutputs(const std_msgs::Header& header, bool make_vis,
+                     const StreamResult& result,
+                     const std::vector<std::uint8_t>& present,
+                     PipelineOutput* output) const;
 
   NodeSettings settings_;
   TopicNames topics_;
-  Solver solver_;
+  StreamFuser fuser_;
   FusionProblem problem_;
-  SolverState state_;
-  SolverState warp_scratch_;  ///< buffers of the rotation warp, reused
-  SolveReport report_;
   std::vector<NormalMap> raw_normals_;     ///< per input, as received
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
   PlanarImage resample_scratch_;  ///< resampleMap()'s masked source copy
-  TemporalAverage temporal_;      ///< the inputs' averages over time
-  /// The averages were updated with the previous set (averaging was on).
-  bool averages_current_ = false;
-  bool has_previous_ = false;
-  ros::Time previous_stamp_;
-  /// Wall time the previous set took (conversion, warp, solve): sets that
-  /// arrive meanwhile are dropped, so the stamp gap to the next one solved
-  /// is at least this long.
-  double previous_seconds_ = 0.0;
-  CameraIntrinsics previous_K_;
-  std::uint64_t frames_processed_ = 0;
-  /// Seconds the outputs' encoding takes, reserved inside the frame budget.
-  double encode_estimate_s_ = 0.0;
-  /// Seconds reserved for what the solve's own deadline cannot foresee (a
-  /// loaded machine): the 98th percentile of the frames' overruns.
-  double overrun_reserve_s_ = 0.0;
 };
 
 }  // namespace node

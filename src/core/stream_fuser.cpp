@@ -1,0 +1,303 @@
+#include "normal_fusion/stream_fuser.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "normal_fusion/detail/previous_pixel.h"
+#include "normal_fusion/errors.h"
+
+namespace normal_fusion {
+
+FrameRotation FrameRotation::known(const std::array<double, 9>& R_cur_prev) {
+  FrameRotation rotation;
+  rotation.kind = Kind::kKnown;
+  rotation.R_cur_prev = R_cur_prev;
+  return rotation;
+}
+
+FrameRotation FrameRotation::unknown(const std::string& reason) {
+  FrameRotation rotation;
+  rotation.kind = Kind::kUnknown;
+  rotation.reason = reason;
+  return rotation;
+}
+
+namespace {
+
+/// later - earlier in seconds (integer nanoseconds, no overflow for stamps
+/// of this era).
+double secondsBetween(std::int64_t later_ns, std::int64_t earlier_ns) {
+  return 1e-9 * static_cast<double>(later_ns - earlier_ns);
+}
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
+/// The number of pixels of `normals` that are not finite unit vectors.
+std::size_t nonUnitPixels(const NormalMap& normals) {
+  std::size_t bad = 0;
+  const std::size_t n = normals.pixelCount();
+  const float* x = normals.plane(0);
+  const float* y = normals.plane(1);
+  const float* z = normals.plane(2);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float length2 = x[i] * x[i] + y[i] * y[i] + z[i] * z[i];
+    // NaN fails the comparison and counts as bad.
+    bad += !(std::abs(length2 - 1.0f) <= 1e-3f);
+  }
+  return bad;
+}
+
+}  // namespace
+
+StreamFuser::StreamFuser(const StreamSettings& settings,
+                         const std::string& name)
+    : settings_(settings), name_(name), solver_(settings.solver) {}
+
+void StreamFuser::setSettings(const StreamSettings& settings) {
+  solver_.setSettings(settings.solver);
+  settings_ = settings;
+}
+
+void StreamFuser::reset() {
+  has_previous_ = false;
+  state_.clear();
+  temporal_.reset();
+  averages_current_ = false;
+}
+
+bool StreamFuser::continuesStream(std::int64_t stamp_ns,
+                                  const CameraIntrinsics& K, int width,
+                                  int height, int num_inputs,
+                                  std::string* reason) const {
+  if (!has_previous_) {
+    *reason = "no previous frame";
+    return false;
+  }
+  if (stamp_ns < previous_stamp_ns_) {
+    *reason = "time went backwards";
+    return false;
+  }
+  if (!state_.compatible(width, height, num_inputs)) {
+    *reason = "the image size changed";
+    return false;
+  }
+  for (int i = 0; i < 9; ++i) {
+    if (std::abs(K.K[i] - previous_K_.K[i]) >
+        1e-9 * std::max(1.0, std::abs(previous_K_.K[i]))) {
+      *reason = "K changed";
+      return false;
+    }
+  }
+  // The gap the previous frame's own processing opened does not count:
+  // after a long solve (a stream's converged start) the next frame solved is
+  // the newest, its stamp that much later.
+  const double gap = secondsBetween(stamp_ns, previous_stamp_ns_);
+  if (gap > settings_.warm_start_max_gap + previous_seconds_) {
+    std::ostringstream text;
+    text << "stamp gap " << gap << " s exceeds warm_start_max_gap plus the "
+         << "previous set's processing (" << previous_seconds_ << " s)";
+    *reason = text.str();
+    return false;
+  }
+  return true;
+}
+
+bool StreamFuser::applyRotation(const CameraIntrinsics& K,
+                                const std::array<double, 9>& R_cur_prev,
+                                std::string* reason, double* seconds) {
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    if (settings_.warm_start) {
+      // With the local refinement the duals are reset (as good, and
+      // cheaper: see DualWarp).
+      const DualWarp dual_warp = settings_.dual_warp.value_or(
+          solver_.settings().warm_refine_iterations > 0 ? DualWarp::kReset
+                                                        : DualWarp::kRotate);
+      warpStateByRotation(state_, K, R_cur_prev, warp_scratch_,
+                          solver_.settings().num_threads, dual_warp);
+    } else {
+      internal::checkRotation(R_cur_prev, "the transform");
+    }
+  } catch (const Error& e) {
+    *reason = e.what();
+    return false;
+  }
+  *seconds = secondsSince(start);
+  return true;
+}
+
+void StreamFuser::averageInputs(FusionProblem& frame,
+                                const FrameRotation& rotation, bool rotated,
+                                bool joined, double* seconds) {
+  const auto start = std::chrono::steady_clock::now();
+  // A new stream, or averages left from before averaging was last turned
+  // off (stale): they restart with this frame.
+  if (!joined) temporal_.reset();
+  try {
+    temporal_.apply(
+        frame.inputs, frame.K, rotated ? &rotation.R_cur_prev : nullptr,
+        settings_.temporal, resolveThreadCount(settings_.solver.num_threads));
+  } catch (...) {
+    reset();
+    throw;
+  }
+  averages_current_ = true;
+  *seconds = secondsSince(start);
+}
+
+void StreamFuser::solve(FusionProblem& frame, bool warm,
+                        std::chrono::steady_clock::time_point started) {
+  try {
+    // time_budget_ms covers the whole frame, the caller's encoding of the
+    // outputs included: its time (as the last frames took) and the overrun
+    // reserve are set aside by starting the budget that much earlier.
+    const auto reserve =
+        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+            std::chrono::duration<double>(encode_estimate_s_ +
+                                          overrun_reserve_s_));
+    solver_.setBudgetStart(started - reserve);
+    solver_.solve(frame, state_, warm, report_);
+    if (report_.cancelled) throw Cancelled(name_ + ": solve cancelled");
+    // The warp's buffers, sized with the state (allocates on the first frame
+    // of a size only).
+    warp_scratch_.resize(state_.normals.width(), state_.normals.height(),
+                         static_cast<int>(state_.dual_data.size()));
+  } catch (...) {
+    reset();
+    throw;
+  }
+}
+
+std::string StreamFuser::streamStartNote(const std::string& reason) const {
+  std::ostringstream text;
+  text << "stream (re)started (" << reason << "): cold start in "
+       << std::lround(1e3 * report_.seconds) << " ms, "
+       << report_.inner_iterations + report_.coarse_inner_iterations
+       << " inner iterations";
+  if (report_.cold_start_budget_used) {
+    const double budget = solver_.settings().cold_start_budget_ms;
+    text << " under cold_start_budget_ms ";
+    if (budget > 0.0) {
+      text << "(" << budget << " ms)";
+    } else {
+      text << "(none: the iteration caps)";
+    }
+    text << " instead of time_budget_ms (" << solver_.settings().time_budget_ms
+         << " ms)";
+  }
+  return text.str();
+}
+
+void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
+                       const FrameRotation& rotation,
+                       std::chrono::steady_clock::time_point started,
+                       StreamResult* result) {
+  *result = StreamResult();
+  frame_started_ = started;
+  if (has_previous_ && stamp_ns < previous_stamp_ns_) {
+    std::ostringstream text;
+    text << "time went backwards by "
+         << secondsBetween(previous_stamp_ns_, stamp_ns)
+         << " s (a bag loop or a restarted player): warm start reset";
+    result->warning = text.str();
+    reset();
+  }
+  // A warm start wanted but the previous map unusable: the stream
+  // (re)starts here. Its cold start is solved under cold_start_budget_ms
+  // (the solver's rule for a warm start asked for without a usable state),
+  // since the warm frames after it carry its map on. An unknown rotation is
+  // a one-frame failure instead: that frame is cold-started under the frame
+  // budget. The averages follow the same stream: carried by the same
+  // rotation, restarted where the warm start would be.
+  const bool averaging = settings_.temporal.enabled();
+  bool continuous = false;  // this frame continues the previous one's stream
+  if (settings_.warm_start || averaging) {
+    continuous = continuesStream(
+        stamp_ns, frame.K, frame.image.width(), frame.image.height(),
+        static_cast<int>(frame.inputs.size()), &result->restart_reason);
+    if (!continuous && settings_.warm_start) {
+      result->stream_started = true;
+      state_.clear();
+    }
+  }
+  if (continuous && rotation.kind != FrameRotation::Kind::kStill) {
+    std::string why = rotation.reason;
+    result->rotated = rotation.kind == FrameRotation::Kind::kKnown &&
+                      applyRotation(frame.K, rotation.R_cur_prev, &why,
+                                    &result->warp_seconds);
+    if (!result->rotated) {
+      result->rotation_failed = true;
+      result->rotation_unknown = why;
+      result->rotation_consequence =
+          settings_.warm_start && averaging
+              ? "cold start, input averages restarted"
+              : (settings_.warm_start ? "cold start"
+                                      : "input averages restarted");
+    }
+  }
+  // Aligned with the previous frame: by the rotation, or taken as still.
+  const bool aligned =
+      continuous &&
+      (rotation.kind == FrameRotation::Kind::kStill || result->rotated);
+  const bool warm = settings_.warm_start && aligned;
+  // This frame's samples join the previous frames' averages (else restart).
+  result->inputs_averaged = averaging && aligned && averages_current_;
+  if (averaging) {
+    averageInputs(frame, rotation, result->rotated, result->inputs_averaged,
+                  &result->average_seconds);
+  } else {
+    averages_current_ = false;
+  }
+  result->budget_reserve_seconds = overrun_reserve_s_;
+  solve(frame, warm || result->stream_started, started);
+  if (result->stream_started) {
+    result->note = streamStartNote(result->restart_reason);
+  }
+  const std::size_t bad_pixels = nonUnitPixels(state_.normals);
+  if (bad_pixels > 0) {
+    // Never given out: a fused map holds a unit normal at every pixel.
+    reset();
+    std::ostringstream text;
+    text << name_ << ": the solve gave " << bad_pixels << " of "
+         << state_.normals.pixelCount()
+         << " pixels without a finite unit normal (K, the inputs or the "
+            "settings are degenerate); frame skipped, stream reset";
+    throw Error(text.str());
+  }
+  has_previous_ = true;
+  previous_stamp_ns_ = stamp_ns;
+  previous_K_ = frame.K;
+  ++frames_fused_;
+  // Until endFrame() says more: the frame's time so far.
+  previous_seconds_ = secondsSince(started);
+}
+
+double StreamFuser::endFrame(double encode_seconds) {
+  // A slow running estimate: one frame's hiccup does not halve the next
+  // frame's solve.
+  encode_estimate_s_ = frames_fused_ == 1
+                           ? encode_seconds
+                           : 0.8 * encode_estimate_s_ + 0.2 * encode_seconds;
+  const double frame_seconds = secondsSince(frame_started_);
+  previous_seconds_ = frame_seconds;
+  // The overrun reserve tracks the kBudgetQuantile quantile of the frames'
+  // overruns (a stochastic quantile estimate): up by q steps after a frame
+  // over the budget, down by 1 - q steps after one within, so that about
+  // that share of frames keeps the budget whatever the machine's load.
+  const double budget_s = 1e-3 * solver_.settings().time_budget_ms;
+  if (budget_s > 0.0 && !report_.cold_start_budget_used) {
+    constexpr double kBudgetQuantile = 0.98, kStepS = 1e-3;
+    overrun_reserve_s_ += frame_seconds > budget_s
+                              ? kStepS * kBudgetQuantile
+                              : -kStepS * (1.0 - kBudgetQuantile);
+    overrun_reserve_s_ =
+        std::min(std::max(overrun_reserve_s_, 0.0), 0.5 * budget_s);
+  }
+  return frame_seconds;
+}
+
+}  // namespace normal_fusion

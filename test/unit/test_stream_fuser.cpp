@@ -1,0 +1,298 @@
+// Tests of StreamFuser, the stream policy the node runs: when the previous
+// result warm-starts a frame, when the stream restarts, the inputs' averages
+// over time, the duals of the rotation warp and the frame budget's reserves.
+#include "normal_fusion/stream_fuser.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "normal_fusion/errors.h"
+#include "normal_fusion/metrics.h"
+#include "normal_fusion/synthetic.h"
+
+namespace normal_fusion {
+namespace {
+
+constexpr std::int64_t kSecond = 1000000000;
+
+std::int64_t nanoseconds(double seconds) { return std::llround(seconds * 1e9); }
+
+/// The frame's two inputs: paper noise and noisy depth (new noise per seed).
+FusionProblem problemFor(const synthetic::Frame& frame, int seed) {
+  FusionProblem problem;
+  problem.image = frame.image;
+  problem.K = frame.K;
+  NormalInput noisy, depth;
+  noisy.normals = synthetic::addPaperNoise(frame.normals_gt, 0.4, 100 + seed);
+  depth.normals =
+      synthetic::normalsFromNoisyDepth(frame, 0.01, 0.02, 200 + seed);
+  problem.inputs = {noisy, depth};
+  return problem;
+}
+
+StreamSettings streamSettings() {
+  StreamSettings settings;
+  settings.solver.num_threads = 2;
+  settings.solver.max_total_inner_iterations = 300;  // short: a fast test
+  return settings;
+}
+
+/// Fuses `frame` at `seconds` with the camera taken as still.
+StreamResult fuseAt(StreamFuser& fuser, const synthetic::Frame& frame,
+                    double seconds, int seed = 1,
+                    const FrameRotation& rotation = FrameRotation::still()) {
+  FusionProblem problem = problemFor(frame, seed);
+  StreamResult result;
+  fuser.fuse(nanoseconds(seconds), problem, rotation,
+             std::chrono::steady_clock::now(), &result);
+  fuser.endFrame(0.0);
+  return result;
+}
+
+bool sameBits(const NormalMap& a, const NormalMap& b) {
+  return a.width() == b.width() && a.height() == b.height() &&
+         std::memcmp(a.plane(0), b.plane(0),
+                     3 * a.pixelCount() * sizeof(float)) == 0;
+}
+
+TEST(StreamFuser, AGoodFrameWarmStartsTheNext) {
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(streamSettings());
+  StreamResult result = fuseAt(fuser, frame, 1.0);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_TRUE(result.stream_started);
+  EXPECT_EQ(result.restart_reason, "no previous frame");
+  EXPECT_NE(result.note.find("cold start"), std::string::npos) << result.note;
+  EXPECT_EQ(fuser.previousStampNs(), kSecond);
+  result = fuseAt(fuser, frame, 1.033, 2);
+  EXPECT_TRUE(fuser.lastReport().warm_started);
+  EXPECT_FALSE(result.stream_started);
+  EXPECT_TRUE(result.note.empty()) << result.note;
+  EXPECT_TRUE(result.warning.empty()) << result.warning;
+  EXPECT_EQ(fuser.framesFused(), 2u);
+  // Warm starts off: every frame a one-shot cold start, no stream restart.
+  StreamSettings cold_settings = streamSettings();
+  cold_settings.warm_start = false;
+  StreamFuser cold(cold_settings);
+  for (double seconds : {1.0, 1.033}) {
+    result = fuseAt(cold, frame, seconds);
+    EXPECT_FALSE(cold.lastReport().warm_started);
+    EXPECT_FALSE(result.stream_started);
+  }
+}
+
+TEST(StreamFuser, AGapTimeGoingBackAnotherKOrSizeRestartTheStream) {
+  StreamSettings settings = streamSettings();
+  settings.warm_start_max_gap = 0.2;
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(settings);
+  fuseAt(fuser, frame, 1.0);
+  fuseAt(fuser, frame, 1.1);
+  EXPECT_TRUE(fuser.lastReport().warm_started);
+  StreamResult result = fuseAt(fuser, frame, 3.0);
+  EXPECT_FALSE(fuser.lastReport().warm_started) << "gap above the maximum";
+  EXPECT_TRUE(result.stream_started);
+  EXPECT_NE(result.restart_reason.find("exceeds warm_start_max_gap"),
+            std::string::npos)
+      << result.restart_reason;
+  // Time going backwards resets the stream, with a warning.
+  std::string reason;
+  EXPECT_FALSE(
+      fuser.continuesStream(nanoseconds(0.5), frame.K, 64, 48, 2, &reason));
+  result = fuseAt(fuser, frame, 0.5);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_TRUE(result.stream_started);
+  EXPECT_NE(result.warning.find("time went backwards"), std::string::npos);
+  // Another K.
+  synthetic::Frame zoomed = frame;
+  zoomed.K.K[0] *= 1.1;
+  EXPECT_FALSE(
+      fuser.continuesStream(nanoseconds(0.6), zoomed.K, 64, 48, 2, &reason));
+  EXPECT_EQ(reason, "K changed");
+  result = fuseAt(fuser, zoomed, 0.6);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_EQ(result.restart_reason, "K changed");
+  // Another size.
+  const synthetic::Frame smaller = synthetic::renderScene(0, 32, 24);
+  result = fuseAt(fuser, smaller, 0.7);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_EQ(result.restart_reason, "the image size changed");
+  // And the same size again continues.
+  EXPECT_TRUE(
+      fuser.continuesStream(nanoseconds(0.8), smaller.K, 32, 24, 2, &reason));
+  fuseAt(fuser, smaller, 0.8);
+  EXPECT_TRUE(fuser.lastReport().warm_started);
+  // An explicit reset.
+  fuser.reset();
+  result = fuseAt(fuser, smaller, 0.9);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_EQ(result.restart_reason, "no previous frame");
+}
+
+/// The stamp gap that the previous frame's own processing opened does not
+/// end the stream: with warm_start_max_gap 0, a frame 0.5 ms after one that
+/// took longer than that (2000 iterations) still warm-starts.
+TEST(StreamFuser, TheGapOfTheProcessingItselfDoesNotEndTheStream) {
+  StreamSettings settings = streamSettings();
+  settings.warm_start_max_gap = 0.0;
+  settings.solver.max_total_inner_iterations = 2000;
+  settings.solver.max_outer_iterations = 100;
+  settings.solver.relative_tolerance = 0.0;
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(settings);
+  fuseAt(fuser, frame, 1.0);
+  ASSERT_EQ(fuser.lastReport().inner_iterations, 2000);
+  fuseAt(fuser, frame, 1.0005);
+  EXPECT_TRUE(fuser.lastReport().warm_started);
+  const StreamResult result = fuseAt(fuser, frame, 101.0);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_NE(result.restart_reason.find("exceeds warm_start_max_gap"),
+            std::string::npos);
+}
+
+/// A still camera's noisy frames averaged give a better map than the same
+/// stream without; the averages restart with the stream, after being turned
+/// off, and on an unknown rotation (which also cold-starts the frame).
+TEST(StreamFuser, TemporalAveragingFollowsTheStream) {
+  const synthetic::Frame frame = synthetic::renderScene(0, 96, 72);
+  StreamSettings averaged_settings = streamSettings();
+  averaged_settings.temporal.frames = 8;
+  StreamFuser plain(streamSettings()), averaged(averaged_settings);
+  for (int k = 0; k < 8; ++k) {
+    const double seconds = 1.0 + 0.033 * k;
+    EXPECT_FALSE(fuseAt(plain, frame, seconds, 40 + k).inputs_averaged);
+    const StreamResult result = fuseAt(averaged, frame, seconds, 40 + k);
+    EXPECT_EQ(result.inputs_averaged, k > 0) << "frame " << k;
+    EXPECT_GT(result.average_seconds, 0.0);
+  }
+  const double p_plain = psnr(plain.fusedNormals(), frame.normals_gt);
+  const double p_averaged = psnr(averaged.fusedNormals(), frame.normals_gt);
+  EXPECT_GT(p_averaged, p_plain + 1.0)
+      << "plain " << p_plain << " dB, averaged " << p_averaged << " dB";
+  // Off for a frame and on again: the old averages are not used.
+  StreamSettings off = averaged_settings;
+  off.temporal.frames = 0;
+  averaged.setSettings(off);
+  EXPECT_FALSE(fuseAt(averaged, frame, 1.3, 58).inputs_averaged);
+  averaged.setSettings(averaged_settings);
+  EXPECT_FALSE(fuseAt(averaged, frame, 1.333, 59).inputs_averaged);
+  EXPECT_TRUE(averaged.lastReport().warm_started);
+  EXPECT_TRUE(fuseAt(averaged, frame, 1.366, 60).inputs_averaged);
+  // A known rotation carries them; an unknown one restarts them.
+  const std::array<double, 9> identity{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  StreamResult result =
+      fuseAt(averaged, frame, 1.4, 61, FrameRotation::known(identity));
+  EXPECT_TRUE(result.inputs_averaged);
+  EXPECT_TRUE(result.rotated);
+  EXPECT_TRUE(averaged.lastReport().warm_started);
+  result = fuseAt(averaged, frame, 1.433, 62,
+                  FrameRotation::unknown("no transform"));
+  EXPECT_TRUE(result.rotation_failed);
+  EXPECT_EQ(result.rotation_unknown, "no transform");
+  EXPECT_EQ(result.rotation_consequence,
+            "cold start, input averages restarted");
+  EXPECT_FALSE(result.inputs_averaged);
+  EXPECT_FALSE(averaged.lastReport().warm_started);
+  EXPECT_FALSE(result.stream_started) << "a one-frame failure";
+  // A matrix that is not a rotation is refused likewise.
+  result = fuseAt(averaged, frame, 1.466, 63,
+                  FrameRotation::known({2, 0, 0, 0, 1, 0, 0, 0, 1}));
+  EXPECT_TRUE(result.rotation_failed);
+  EXPECT_NE(result.rotation_unknown.find("not a rotation"), std::string::npos);
+  EXPECT_FALSE(averaged.lastReport().warm_started);
+  // A gap ends the stream: the averages restart with the warm start.
+  result = fuseAt(averaged, frame, 9.0, 64);
+  EXPECT_FALSE(result.inputs_averaged);
+  EXPECT_TRUE(result.stream_started);
+}
+
+/// The rotation warp resets the duals while the local refinement is on and
+/// rotates them without it, unless the settings say otherwise.
+TEST(StreamFuser, TheDualsAreResetWithTheLocalRefinement) {
+  const auto frames = synthetic::renderSequence(0, 64, 48, 3, 1.0);
+  const auto fused = [&](int refine, std::optional<DualWarp> dual_warp) {
+    StreamSettings settings = streamSettings();
+    settings.solver.time_budget_ms = 0.0;  // by the iterations: bits repeat
+    settings.solver.max_total_inner_iterations = 100;
+    settings.solver.warm_refine_iterations = refine;
+    settings.dual_warp = dual_warp;
+    StreamFuser fuser(settings);
+    for (int k = 0; k < 3; ++k) {
+      const FrameRotation rotation =
+          k == 0 ? FrameRotation::still()
+                 : FrameRotation::known(synthetic::relativeRotation(
+                       frames[k].pose, frames[k - 1].pose));
+      const StreamResult result =
+          fuseAt(fuser, frames[k], frames[k].stamp, k, rotation);
+      EXPECT_EQ(result.rotated, k > 0);
+    }
+    return fuser.fusedNormals();
+  };
+  const int refine = StreamSettings().solver.warm_refine_iterations;
+  ASSERT_GT(refine, 0);
+  const NormalMap by_default = fused(refine, std::nullopt);
+  EXPECT_TRUE(sameBits(by_default, fused(refine, DualWarp::kReset)));
+  EXPECT_FALSE(sameBits(by_default, fused(refine, DualWarp::kRotate)));
+  const NormalMap unrefined = fused(0, std::nullopt);
+  EXPECT_TRUE(sameBits(unrefined, fused(0, DualWarp::kRotate)));
+  EXPECT_FALSE(sameBits(unrefined, fused(0, DualWarp::kReset)));
+}
+
+TEST(StreamFuser, AFailedSolveResetsTheStream) {
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(streamSettings());
+  fuseAt(fuser, frame, 1.0);
+  fuseAt(fuser, frame, 1.033);
+  ASSERT_TRUE(fuser.lastReport().warm_started);
+  FusionProblem empty = problemFor(frame, 3);
+  for (NormalInput& input : empty.inputs) input.normals.fill(NAN);
+  StreamResult result;
+  EXPECT_THROW(fuser.fuse(nanoseconds(1.066), empty, FrameRotation::still(),
+                          std::chrono::steady_clock::now(), &result),
+               InputError);
+  result = fuseAt(fuser, frame, 1.1);
+  EXPECT_FALSE(fuser.lastReport().warm_started);
+  EXPECT_EQ(result.restart_reason, "no previous frame");
+  EXPECT_EQ(fuser.framesFused(), 3u);
+}
+
+/// What the frame budget sets aside for overruns: a reserve that grows after
+/// warm frames over the budget (not the stream's cold start) and shrinks
+/// after frames within it.
+TEST(StreamFuser, TheBudgetReserveTracksOverruns) {
+  StreamSettings settings = streamSettings();
+  settings.solver.time_budget_ms = 1e-3;  // every frame overruns it
+  settings.solver.pyramid_levels = 1;
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(settings);
+  std::vector<double> reserves;
+  double seconds = 1.0;
+  for (int k = 0; k < 4; ++k) {
+    reserves.push_back(
+        fuseAt(fuser, frame, seconds += 0.03).budget_reserve_seconds);
+  }
+  EXPECT_EQ(reserves[0], 0.0);
+  EXPECT_EQ(reserves[1], 0.0);
+  EXPECT_EQ(reserves[2], 0.5e-6);
+  EXPECT_EQ(reserves[3], 0.5e-6);
+  settings.solver.time_budget_ms = 1000.0;
+  fuser.setSettings(settings);
+  std::vector<double> after;
+  for (int k = 0; k < 3; ++k) {
+    fuseAt(fuser, frame, seconds += 0.03);
+    after.push_back(fuser.overrunReserveSeconds());
+  }
+  EXPECT_EQ(after[0], 0.0);
+  EXPECT_EQ(after[2], 0.0);
+}
+
+}  // namespace
+}  // namespace normal_fusion
