@@ -30,7 +30,7 @@
 #include "normal_fusion/ros/log_throttle.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/ros/pipeline.h"
-#include "normal_fusion/ros/synchronizer.h"
+#include "normal_fusion/synchronizer.h"
 
 namespace normal_fusion {
 namespace node {
@@ -58,7 +58,13 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   /// The parameters' ranges to dynamic_reconfigure clients.
   void publishParameterRanges();
   void workerLoop();
+  /// The worker's settings: dynamic_reconfigure's changes handed to the
+  /// pipeline; returns the rotation lookup they ask for (empty: none).
+  RotationLookup applyNewSettings();
   void publishOutputs(const PipelineOutput& output);
+  // Diagnostics (src/ros/diagnostics.cpp): the updater, its timer and the
+  // warning when no set forms.
+  void setupDiagnostics();
   void checkMissingInputs();
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   Synchronizer::Options syncOptions(const NodeSettings& settings) const;
