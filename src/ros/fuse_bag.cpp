@@ -43,9 +43,10 @@
 #include <vector>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/ros/output_bag.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/ros/pipeline.h"
-#include "normal_fusion/ros/synchronizer.h"
+#include "normal_fusion/synchronizer.h"
 
 namespace nf = normal_fusion;
 namespace nn = normal_fusion::node;
@@ -175,19 +176,6 @@ nn::NodeSettings loadSettings(const Options& o) {
   return settings;
 }
 
-/// An error that ends the run: printed as one line "fuse_bag: <what>", exit
-/// status 1.
-class Fatal : public std::runtime_error {
- public:
-  explicit Fatal(const std::string& what) : std::runtime_error(what) {}
-};
-
-/// `what`, with the text of `error` (an errno value) when there is one.
-std::string withErrno(const std::string& what, int error) {
-  if (error == 0) return what;
-  return what + " (" + std::strerror(error) + ")";
-}
-
 /// A message on one line.
 std::string oneLine(std::string text) {
   for (char& c : text) {
@@ -204,132 +192,11 @@ void refuseOutputIsInput(const Options& o) {
   if (::stat(o.input.c_str(), &in_stat) != 0) return;    // reported on reading
   if (::stat(o.output.c_str(), &out_stat) != 0) return;  // a new file
   if (in_stat.st_dev == out_stat.st_dev && in_stat.st_ino == out_stat.st_ino) {
-    throw Fatal("--output " + o.output + " is the input bag " + o.input +
-                "; refusing to overwrite it (choose another output path)");
+    throw nn::FatalError(
+        "--output " + o.output + " is the input bag " + o.input +
+        "; refusing to overwrite it (choose another output path)");
   }
 }
-
-/// The output bag. A regular file is written under a temporary name in its
-/// directory and renamed to the output path by commit() only; until then (a
-/// failed write, an error elsewhere) the destructor removes the temporary
-/// file. A device or a pipe is written in place.
-class OutputBag {
- public:
-  explicit OutputBag(const std::string& path) : path_(path), final_(path) {
-    struct stat st {};
-    const bool exists = ::stat(path.c_str(), &st) == 0;
-    if (exists && S_ISDIR(st.st_mode)) fail("", EISDIR);
-    if (exists && !S_ISREG(st.st_mode)) {
-      open(path);
-      return;
-    }
-    if (exists) {
-      // A file the user may not write stays as it is (as with writing it in
-      // place), though the rename would replace it.
-      if (::access(path.c_str(), W_OK) != 0) {
-        const int error = errno;
-        fail("", error);
-      }
-      // Through a symbolic link: the bag replaces the file it points to.
-      if (char* real = ::realpath(path.c_str(), nullptr)) {
-        final_ = real;
-        std::free(real);
-      }
-    }
-    std::string temporary = final_ + ".partial-XXXXXX";
-    const int fd = ::mkstemp(&temporary[0]);
-    if (fd < 0) {
-      const int error = errno;
-      fail("", error);
-    }
-    temporary_ = temporary;
-    // The mode of the file replaced, else the one of a new file (mkstemp
-    // makes it 0600).
-    mode_t mode = st.st_mode & 07777;
-    if (!exists) {
-      const mode_t mask = ::umask(0);
-      ::umask(mask);
-      mode = 0666 & ~mask;
-    }
-    ::fchmod(fd, mode);
-    ::close(fd);
-    open(temporary_);
-  }
-
-  ~OutputBag() { discard(); }
-
-  OutputBag(const OutputBag&) = delete;
-  OutputBag& operator=(const OutputBag&) = delete;
-
-  template <typename M>
-  void write(const std::string& topic, const ros::Time& stamp,
-             const M& message) {
-    errno = 0;
-    try {
-      bag_->write(topic, stamp, message);
-    } catch (const std::exception& e) {
-      const int error = errno;
-      fail(e.what(), error);
-    }
-  }
-
-  /// Closes the bag and gives it its name.
-  void commit() {
-    errno = 0;
-    try {
-      bag_->close();
-    } catch (const std::exception& e) {
-      const int error = errno;
-      fail(e.what(), error);
-    }
-    closed_ = true;
-    if (temporary_.empty()) return;
-    if (::rename(temporary_.c_str(), final_.c_str()) != 0) {
-      const int error = errno;
-      fail("cannot rename " + temporary_ + " to " + final_, error);
-    }
-    temporary_.clear();
-  }
-
- private:
-  void open(const std::string& file) {
-    bag_ = new rosbag::Bag;
-    errno = 0;
-    try {
-      bag_->open(file, rosbag::bagmode::Write);
-    } catch (const std::exception& e) {
-      const int error = errno;
-      discard();  // the destructor does not run after a throwing constructor
-      fail(e.what(), error);
-    }
-  }
-
-  /// Removes the temporary file. A bag not closed is left open, not
-  /// deleted: rosbag::Bag's destructor would close it, write its index and,
-  /// after a failed write, throw again (std::terminate).
-  void discard() {
-    if (!temporary_.empty()) ::unlink(temporary_.c_str());
-    temporary_.clear();
-    if (closed_) delete bag_;
-    bag_ = nullptr;
-  }
-
-  [[noreturn]] void fail(const std::string& what, int error) const {
-    std::string text = "cannot write " + path_;
-    if (!what.empty()) {
-      text += ": " + withErrno(what, error);
-    } else if (error != 0) {
-      text += std::string(": ") + std::strerror(error);
-    }
-    throw Fatal(text);
-  }
-
-  std::string path_;            ///< as given
-  std::string final_;           ///< the file that becomes the bag
-  std::string temporary_;       ///< written until commit(); empty when none
-  rosbag::Bag* bag_ = nullptr;  ///< deleted once closed only (see discard())
-  bool closed_ = false;
-};
 
 bool progress_line_open = false;  ///< the progress bar ends no line yet
 
@@ -360,13 +227,9 @@ double percentile(std::vector<double> values, double q) {
   return values[i];
 }
 
-/// The run; throws Fatal (and whatever else goes wrong) to end it.
-int fuseBag(const Options& o) {
-  refuseOutputIsInput(o);
-  nn::NodeSettings settings = loadSettings(o);
-  ros::Time::init();
-
-  // Topics and their roles, as the node has them.
+/// The topics' roles, as the node has them, with the command line's names.
+std::vector<nn::TopicRole> rolesFor(const Options& o,
+                                    const nn::NodeSettings& settings) {
   std::vector<nn::TopicRole> roles = nn::topicRoles(settings);
   for (nn::TopicRole& role : roles) {
     switch (role.kind) {
@@ -386,260 +249,308 @@ int fuseBag(const Options& o) {
         break;
     }
   }
-  std::map<std::string, int> topic_index;
-  std::vector<std::string> topics;
-  for (std::size_t j = 0; j < roles.size(); ++j) {
-    topic_index[roles[j].name] = static_cast<int>(j);
-    topics.push_back(roles[j].name);
+  return roles;
+}
+
+/// One run: the input bag read in its order, synchronized, fused set after
+/// set into the output bag.
+class BagFusion {
+ public:
+  using Synchronizer = nf::StampSynchronizer<nn::QueuedMessage>;
+
+  explicit BagFusion(const Options& o)
+      : o_(o), settings_(loadSettings(o)), roles_(rolesFor(o, settings_)) {
+    for (std::size_t j = 0; j < roles_.size(); ++j) {
+      topic_index_[roles_[j].name] = static_cast<int>(j);
+      topics_.push_back(roles_[j].name);
+    }
+    show_progress_ = !o.quiet && isatty(fileno(stderr));
   }
 
-  const bool show_progress = !o.quiet && isatty(fileno(stderr));
-  std::map<std::string, int> reported;  // errors printed per kind
-  auto reportAs = [&](const std::string& kind, const std::string& text) {
-    if (reported[kind]++ < 3) {
+  /// Throws FatalError (and whatever else goes wrong) to end the run.
+  int run();
+
+ private:
+  void reportAs(const std::string& kind, const std::string& text) {
+    if (reported_[kind]++ < 3) {
       endProgressLine();
       std::fprintf(stderr, "fuse_bag: %s\n", oneLine(text).c_str());
     }
-  };
-  auto report = [&](const std::string& text) {
+  }
+  void report(const std::string& text) {
     reportAs(text.substr(0, text.find(':')), text);
-  };
-  // Messages whose records cannot be read (corrupt bag): skipped, counted.
-  std::size_t unreadable = 0, tf_unreadable = 0;
-  auto reportUnreadable = [&](const rosbag::MessageInstance& m,
-                              const std::exception& e) {
+  }
+  void reportUnreadable(const rosbag::MessageInstance& m,
+                        const std::exception& e) {
     char stamp[32];
     std::snprintf(stamp, sizeof(stamp), "%.3f", m.getTime().toSec());
     reportAs("unreadable", m.getTopic() + ": unreadable message at " + stamp +
                                " s (" + e.what() + "); message skipped");
-  };
-
-  rosbag::Bag in;
-  try {
-    in.open(o.input, rosbag::bagmode::Read);
-  } catch (const std::exception& e) {
-    throw Fatal("cannot read " + o.input + ": " + e.what());
+  }
+  double elapsed() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() -
+                                         started_)
+        .count();
   }
 
-  // The bag's transforms, all loaded first, for the rotation lookup.
-  std::unique_ptr<tf2::BufferCore> tf_buffer;
-  nn::RotationLookup rotation;
-  if (!settings.fixed_frame.empty()) {
-    rosbag::View all(in);
-    // The whole bag's transforms are kept (a Duration holds at most 2^31 s).
-    const double span = std::min(
-        nn::secondsBetween(all.getEndTime(), all.getBeginTime()) + 10.0, 2e9);
-    tf_buffer = std::make_unique<tf2::BufferCore>(ros::Duration(span));
-    rosbag::View tf_view(
-        in, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
-    std::size_t transforms = 0;
-    for (const rosbag::MessageInstance& m : tf_view) {
-      tf2_msgs::TFMessage::ConstPtr tf;
-      try {
-        tf = m.instantiate<tf2_msgs::TFMessage>();
-      } catch (const std::exception& e) {
-        ++tf_unreadable;
-        reportUnreadable(m, e);
-        continue;
-      }
-      if (!tf) continue;
-      for (const auto& t : tf->transforms) {
-        tf_buffer->setTransform(t, "bag", m.getTopic() == "/tf_static");
-        ++transforms;
-      }
+  /// The bag's transforms, all loaded first, for the rotation lookup.
+  void loadTransforms(rosbag::Bag& in);
+  /// Refuses a bag without messages on some input topic.
+  void checkTopics(rosbag::View& view) const;
+  void processSets(std::vector<Synchronizer::Set> sets);
+  /// One message of the bag into the synchronizer (and the sets it forms
+  /// through the pipeline).
+  void addMessage(const rosbag::MessageInstance& m);
+  int printSummary(std::size_t total) const;
+
+  const Options& o_;
+  nn::NodeSettings settings_;
+  std::vector<nn::TopicRole> roles_;
+  std::map<std::string, int> topic_index_;
+  std::vector<std::string> topics_;
+  bool show_progress_ = false;
+  std::map<std::string, int> reported_;  ///< errors printed per kind
+  /// Messages whose records cannot be read (corrupt bag): skipped, counted.
+  std::size_t unreadable_ = 0, tf_unreadable_ = 0;
+  std::unique_ptr<tf2::BufferCore> tf_buffer_;
+  nn::RotationLookup rotation_;
+  std::unique_ptr<nn::OutputBag> out_;
+  std::unique_ptr<Synchronizer> sync_;
+  nn::MessageLimits limits_;
+  std::unique_ptr<nn::FusionPipeline> pipeline_;
+  nn::PipelineOutput output_;
+  std::uint64_t skipped_ = 0, bad_messages_ = 0;
+  std::vector<double> solve_times_, iterations_;
+  std::size_t warm_ = 0;
+  std::chrono::steady_clock::time_point started_;
+};
+
+void BagFusion::loadTransforms(rosbag::Bag& in) {
+  rosbag::View all(in);
+  // The whole bag's transforms are kept (a Duration holds at most 2^31 s).
+  const double span = std::min(
+      nn::secondsBetween(all.getEndTime(), all.getBeginTime()) + 10.0, 2e9);
+  tf_buffer_ = std::make_unique<tf2::BufferCore>(ros::Duration(span));
+  rosbag::View tf_view(
+      in, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
+  std::size_t transforms = 0;
+  for (const rosbag::MessageInstance& m : tf_view) {
+    tf2_msgs::TFMessage::ConstPtr tf;
+    try {
+      tf = m.instantiate<tf2_msgs::TFMessage>();
+    } catch (const std::exception& e) {
+      ++tf_unreadable_;
+      reportUnreadable(m, e);
+      continue;
     }
-    rotation = nn::rotationLookupFromBuffer(*tf_buffer, settings.fixed_frame);
-    if (!o.quiet) {
-      std::fprintf(stderr, "fuse_bag: %zu transforms from /tf, /tf_static\n",
-                   transforms);
+    if (!tf) continue;
+    for (const auto& t : tf->transforms) {
+      tf_buffer_->setTransform(t, "bag", m.getTopic() == "/tf_static");
+      ++transforms;
     }
   }
+  rotation_ = nn::rotationLookupFromBuffer(*tf_buffer_, settings_.fixed_frame);
+  if (!o_.quiet) {
+    std::fprintf(stderr, "fuse_bag: %zu transforms from /tf, /tf_static\n",
+                 transforms);
+  }
+}
 
-  rosbag::View view(in, rosbag::TopicQuery(topics));
-  const std::size_t total = view.size();
-  std::vector<bool> seen(roles.size(), false);
+void BagFusion::checkTopics(rosbag::View& view) const {
+  std::vector<bool> seen(roles_.size(), false);
   for (const rosbag::ConnectionInfo* c : view.getConnections()) {
-    auto it = topic_index.find(c->topic);
-    if (it != topic_index.end()) seen[it->second] = true;
+    auto it = topic_index_.find(c->topic);
+    if (it != topic_index_.end()) seen[it->second] = true;
   }
   std::string missing;
-  for (std::size_t j = 0; j < roles.size(); ++j) {
-    if (!seen[j]) missing += " " + roles[j].name;
+  for (std::size_t j = 0; j < roles_.size(); ++j) {
+    if (!seen[j]) missing += " " + roles_[j].name;
   }
   if (!missing.empty()) {
-    throw Fatal(o.input + " has no messages on:" + missing);
+    throw nn::FatalError(o_.input + " has no messages on:" + missing);
   }
-  OutputBag out(o.output);
+}
 
-  using Synchronizer = nn::StampSynchronizer<nn::QueuedMessage>;
+void BagFusion::processSets(std::vector<Synchronizer::Set> sets) {
+  for (const auto& discard : sync_->takeDiscards()) {
+    if (discard.missing_topic >= 0 &&
+        roles_[discard.missing_topic].kind == nn::TopicRole::kCameraInfo) {
+      ++skipped_;
+      report(roles_[discard.missing_topic].name +
+             ": no camera_info for an image; frame skipped");
+    }
+  }
+  for (const auto& set : sets) {
+    // Unusable input skips the frame, as in the node; running out of
+    // memory ends the run.
+    try {
+      const nn::InputSet input = nn::inputSetFrom(
+          roles_, set.messages, set.present, settings_.num_inputs);
+      pipeline_->process(input, rotation_, o_.vis, &output_);
+    } catch (const std::bad_alloc&) {
+      throw nn::FatalError("out of memory while fusing a set");
+    } catch (const std::exception& e) {
+      ++skipped_;
+      report(std::string(e.what()) + "; frame skipped");
+      continue;
+    }
+    if (!output_.warning.empty()) report(output_.warning);
+    output_.stats->frames_skipped = skipped_;
+    output_.stats->frames_dropped = 0;
+    const ros::Time stamp = output_.fused->header.stamp;
+    out_->write(o_.fused, stamp, *output_.fused);
+    if (output_.fused_vis) out_->write(o_.fused_vis, stamp, *output_.fused_vis);
+    out_->write(o_.stats, stamp, *output_.stats);
+    solve_times_.push_back(output_.stats->solve_time);
+    iterations_.push_back(output_.stats->inner_iterations +
+                          output_.stats->coarse_inner_iterations);
+    warm_ += output_.stats->warm_started ? 1 : 0;
+  }
+}
+
+void BagFusion::addMessage(const rosbag::MessageInstance& m) {
+  const int topic = topic_index_.at(m.getTopic());
+  nn::QueuedMessage message;
+  const std_msgs::Header* header = nullptr;
+  try {
+    if (roles_[topic].kind == nn::TopicRole::kCameraInfo) {
+      message.info = m.instantiate<sensor_msgs::CameraInfo>();
+      if (message.info) header = &message.info->header;
+    } else {
+      message.image = m.instantiate<sensor_msgs::Image>();
+      if (message.image) header = &message.image->header;
+    }
+  } catch (const std::bad_alloc&) {
+    throw;
+  } catch (const std::exception& e) {
+    // A corrupt record (rosbag::BagException, a serialization overrun): the
+    // bag's index still leads to the next message.
+    ++unreadable_;
+    reportUnreadable(m, e);
+    return;
+  }
+  if (header == nullptr) {
+    ++bad_messages_;
+    report(m.getTopic() + ": unexpected message type " + m.getDataType());
+    return;
+  }
+  try {
+    nn::precheckMessage(roles_[topic].name, *header, message.image.get(),
+                        limits_);
+  } catch (const nf::Error& e) {
+    ++bad_messages_;
+    report(std::string(e.what()) + "; message skipped");
+    return;
+  }
+  const auto result = sync_->add(topic, header->stamp.toNSec(), message);
+  if (result == Synchronizer::AddResult::kOutOfOrder) {
+    ++bad_messages_;
+    report(roles_[topic].name + ": stamp out of order; message skipped");
+    return;
+  }
+  if (result == Synchronizer::AddResult::kTimeReset) {
+    report(roles_[topic].name + ": time jumped back; synchronizer reset");
+  }
+  processSets(sync_->poll());
+}
+
+int BagFusion::run() {
+  ros::Time::init();
+  rosbag::Bag in;
+  try {
+    in.open(o_.input, rosbag::bagmode::Read);
+  } catch (const std::exception& e) {
+    throw nn::FatalError("cannot read " + o_.input + ": " + e.what());
+  }
+  if (!settings_.fixed_frame.empty()) loadTransforms(in);
+  rosbag::View view(in, rosbag::TopicQuery(topics_));
+  const std::size_t total = view.size();
+  checkTopics(view);
+  out_ = std::make_unique<nn::OutputBag>(o_.output);
+
   Synchronizer::Options sync_options;
-  sync_options.approximate = settings.approximate_sync;
-  sync_options.queue_size = settings.queue_size;
+  sync_options.approximate = settings_.approximate_sync;
+  sync_options.queue_size = settings_.queue_size;
   sync_options.max_interval_ns =
-      static_cast<std::int64_t>(settings.max_interval * 1e9 + 0.5);
-  Synchronizer sync(nn::requiredTopics(roles, settings), sync_options);
-  nn::MessageLimits limits;
-  limits.max_pixels = static_cast<std::uint64_t>(settings.max_pixels);
-  nn::FusionPipeline pipeline(settings,
-                              nn::topicNamesOf(roles, settings.num_inputs));
-
-  std::uint64_t skipped = 0, bad_messages = 0;
-  std::vector<double> solve_times, iterations;
-  std::size_t warm = 0, done = 0;
-  const auto started = std::chrono::steady_clock::now();
-  auto elapsed = [&] {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() -
-                                         started)
-        .count();
-  };
-  nn::PipelineOutput output;
-  auto processSets = [&](std::vector<Synchronizer::Set> sets) {
-    for (const auto& discard : sync.takeDiscards()) {
-      if (discard.missing_topic >= 0 &&
-          roles[discard.missing_topic].kind == nn::TopicRole::kCameraInfo) {
-        ++skipped;
-        report(roles[discard.missing_topic].name +
-               ": no camera_info for an image; frame skipped");
-      }
-    }
-    for (const auto& set : sets) {
-      // Unusable input skips the frame, as in the node; running out of
-      // memory ends the run.
-      try {
-        const nn::InputSet input = nn::inputSetFrom(
-            roles, set.messages, set.present, settings.num_inputs);
-        pipeline.process(input, rotation, o.vis, &output);
-      } catch (const std::bad_alloc&) {
-        throw Fatal("out of memory while fusing a set");
-      } catch (const std::exception& e) {
-        ++skipped;
-        report(std::string(e.what()) + "; frame skipped");
-        continue;
-      }
-      if (!output.warning.empty()) report(output.warning);
-      output.stats->frames_skipped = skipped;
-      output.stats->frames_dropped = 0;
-      const ros::Time stamp = output.fused->header.stamp;
-      out.write(o.fused, stamp, *output.fused);
-      if (output.fused_vis) out.write(o.fused_vis, stamp, *output.fused_vis);
-      out.write(o.stats, stamp, *output.stats);
-      solve_times.push_back(output.stats->solve_time);
-      iterations.push_back(output.stats->inner_iterations +
-                           output.stats->coarse_inner_iterations);
-      warm += output.stats->warm_started ? 1 : 0;
-    }
-  };
-
+      static_cast<std::int64_t>(settings_.max_interval * 1e9 + 0.5);
+  sync_ = std::make_unique<Synchronizer>(nn::requiredTopics(roles_, settings_),
+                                         sync_options);
+  limits_.max_pixels = static_cast<std::uint64_t>(settings_.max_pixels);
+  pipeline_ = std::make_unique<nn::FusionPipeline>(
+      settings_, nn::topicNamesOf(roles_, settings_.num_inputs));
+  started_ = std::chrono::steady_clock::now();
   std::size_t read = 0;
   try {
     for (const rosbag::MessageInstance& m : view) {
       ++read;
-      const int topic = topic_index.at(m.getTopic());
-      nn::QueuedMessage message;
-      const std_msgs::Header* header = nullptr;
-      try {
-        if (roles[topic].kind == nn::TopicRole::kCameraInfo) {
-          message.info = m.instantiate<sensor_msgs::CameraInfo>();
-          if (message.info) header = &message.info->header;
-        } else {
-          message.image = m.instantiate<sensor_msgs::Image>();
-          if (message.image) header = &message.image->header;
-        }
-      } catch (const std::bad_alloc&) {
-        throw;
-      } catch (const std::exception& e) {
-        // A corrupt record (rosbag::BagException, a serialization
-        // overrun): the bag's index still leads to the next message.
-        ++unreadable;
-        reportUnreadable(m, e);
-        continue;
-      }
-      if (header == nullptr) {
-        ++bad_messages;
-        report(m.getTopic() + ": unexpected message type " + m.getDataType());
-        continue;
-      }
-      try {
-        nn::precheckMessage(roles[topic].name, *header, message.image.get(),
-                            limits);
-      } catch (const nf::Error& e) {
-        ++bad_messages;
-        report(std::string(e.what()) + "; message skipped");
-        continue;
-      }
-      const auto result = sync.add(topic, header->stamp.toNSec(), message);
-      if (result == Synchronizer::AddResult::kOutOfOrder) {
-        ++bad_messages;
-        report(roles[topic].name + ": stamp out of order; message skipped");
-        continue;
-      }
-      if (result == Synchronizer::AddResult::kTimeReset) {
-        report(roles[topic].name + ": time jumped back; synchronizer reset");
-      }
-      processSets(sync.poll());
-      if (show_progress && (read % 8 == 0 || read == total)) {
-        progress(read, total, solve_times.size(), elapsed());
+      addMessage(m);
+      if (show_progress_ && (read % 8 == 0 || read == total)) {
+        progress(read, total, solve_times_.size(), elapsed());
       }
     }
   } catch (const rosbag::BagException& e) {
-    // Writing errors come as Fatal: this one is of the input.
-    throw Fatal("cannot read " + o.input + ": " + e.what());
+    // Writing errors come as FatalError: this one is of the input.
+    throw nn::FatalError("cannot read " + o_.input + ": " + e.what());
   }
-  processSets(sync.flush());
-  done = solve_times.size();
-  out.commit();
+  processSets(sync_->flush());
+  out_->commit();
   in.close();
-  if (show_progress) {
-    progress(total, total, done, elapsed());
+  if (show_progress_) {
+    progress(total, total, solve_times_.size(), elapsed());
     endProgressLine();
   }
+  return printSummary(total);
+}
 
+int BagFusion::printSummary(std::size_t total) const {
+  const std::size_t done = solve_times_.size();
   const double wall = elapsed();
   const double mean_solve =
       done > 0
-          ? std::accumulate(solve_times.begin(), solve_times.end(), 0.0) / done
+          ? std::accumulate(solve_times_.begin(), solve_times_.end(), 0.0) /
+                done
           : 0.0;
   const double mean_iterations =
       done > 0
-          ? std::accumulate(iterations.begin(), iterations.end(), 0.0) / done
+          ? std::accumulate(iterations_.begin(), iterations_.end(), 0.0) / done
           : 0.0;
-  std::printf("fuse_bag: %s -> %s\n", o.input.c_str(), o.output.c_str());
+  std::printf("fuse_bag: %s -> %s\n", o_.input.c_str(), o_.output.c_str());
   std::printf("  inputs:             %zu messages on %zu topics, %d input(s)\n",
-              total, roles.size(), settings.num_inputs);
+              total, roles_.size(), settings_.num_inputs);
   std::printf(
       "  unreadable:         %zu of %zu messages (corrupt records, "
       "skipped)\n",
-      unreadable, total);
-  std::printf("  frames fused:       %zu (%zu warm-started)\n", done, warm);
+      unreadable_, total);
+  std::printf("  frames fused:       %zu (%zu warm-started)\n", done, warm_);
   std::printf("  images without set: %llu\n",
-              static_cast<unsigned long long>(sync.unmatchedPivots()));
+              static_cast<unsigned long long>(sync_->unmatchedPivots()));
   std::printf("  frames skipped:     %llu (bad input), %llu bad messages\n",
-              static_cast<unsigned long long>(skipped),
-              static_cast<unsigned long long>(bad_messages));
+              static_cast<unsigned long long>(skipped_),
+              static_cast<unsigned long long>(bad_messages_));
   std::printf("  frames dropped:     0 (offline: every set is solved)\n");
   std::printf(
       "  solve time / frame: mean %.1f ms, median %.1f ms, max %.1f ms\n",
-      1e3 * mean_solve, 1e3 * percentile(solve_times, 0.5),
-      1e3 * percentile(solve_times, 1.0));
+      1e3 * mean_solve, 1e3 * percentile(solve_times_, 0.5),
+      1e3 * percentile(solve_times_, 1.0));
   std::printf("  inner iterations:   mean %.0f per frame\n", mean_iterations);
   std::printf("  wall time:          %.2f s (%.1f frames/s)\n", wall,
               wall > 0 ? done / wall : 0.0);
   std::fflush(stdout);
-  if (unreadable > 0 || tf_unreadable > 0) {
-    std::string text = o.input + ": " + std::to_string(unreadable) + " of " +
+  if (unreadable_ > 0 || tf_unreadable_ > 0) {
+    std::string text = o_.input + ": " + std::to_string(unreadable_) + " of " +
                        std::to_string(total) + " messages";
-    if (tf_unreadable > 0) {
-      text += " and " + std::to_string(tf_unreadable) + " of /tf, /tf_static";
+    if (tf_unreadable_ > 0) {
+      text += " and " + std::to_string(tf_unreadable_) + " of /tf, /tf_static";
     }
     std::fprintf(stderr,
                  "fuse_bag: %s could not be read (corrupt records); %s has "
                  "the sets of the others\n",
-                 text.c_str(), o.output.c_str());
+                 text.c_str(), o_.output.c_str());
     return 1;
   }
   if (done == 0) {
     std::fprintf(stderr, "fuse_bag: no set could be fused (%s is empty)\n",
-                 o.output.c_str());
+                 o_.output.c_str());
     return 1;
   }
   return 0;
@@ -655,7 +566,9 @@ int main(int argc, char** argv) {
   const char* text = nullptr;
   std::string message;
   try {
-    return fuseBag(o);
+    // Before the parameters are read (and warned about).
+    refuseOutputIsInput(o);
+    return BagFusion(o).run();
   } catch (const std::bad_alloc&) {
     text = "out of memory";
   } catch (const std::exception& e) {
