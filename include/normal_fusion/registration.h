@@ -27,6 +27,7 @@
 
 #include <array>
 #include <string>
+#include <vector>
 
 #include "normal_fusion/types.h"
 
@@ -102,7 +103,8 @@ class DepthRegistration {
              const ScalarMap* confidence_rgb) const;
 
   RegistrationSettings settings_;
-  ScalarMap zbuffer_;  ///< z_rgb of the surface shown per colour pixel
+  ScalarMap zbuffer_;          ///< z_rgb of the surface shown per colour pixel
+  std::vector<double> ray_x_;  ///< (u - cx) / fx per depth column
 };
 
 /// One-shot form of DepthRegistration::registerNormals.

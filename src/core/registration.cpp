@@ -32,11 +32,11 @@ struct Point {
   double n_rgb[3];  ///< R n_depth, facing the colour camera when asked
 };
 
-/// P_rgb = R z K_depth^-1 (u, v, 1) + t and n_rgb = R n_depth.
-Point transformPixel(int u, int v, float z, const float n_depth[3],
-                     const CameraIntrinsics& K_depth, const RigidTransform& T) {
-  const double X_depth[3] = {(u - K_depth.cx()) / K_depth.fx() * z,
-                             (v - K_depth.cy()) / K_depth.fy() * z, z};
+/// P_rgb = R z K_depth^-1 (u, v, 1) + t and n_rgb = R n_depth; (ray_x,
+/// ray_y) = the first two entries of K_depth^-1 (u, v, 1).
+Point transformPixel(double ray_x, double ray_y, float z,
+                     const float n_depth[3], const RigidTransform& T) {
+  const double X_depth[3] = {ray_x * z, ray_y * z, z};
   Point p;
   for (int r = 0; r < 3; ++r) {
     p.X_rgb[r] = T.t[r];
@@ -145,14 +145,19 @@ void DepthRegistration::registerNormals(
   }
   const CameraIntrinsics& K_rgb = rgb.K;
   const int footprint = settings_.splat == Splat::k2x2 ? 1 : 0;
+  ray_x_.resize(static_cast<std::size_t>(depth_m.width()));
+  for (int u = 0; u < depth_m.width(); ++u) {
+    ray_x_[u] = (u - K_depth.cx()) / K_depth.fx();
+  }
   for (int v = 0; v < depth_m.height(); ++v) {
+    const double ray_y = (v - K_depth.cy()) / K_depth.fy();
     for (int u = 0; u < depth_m.width(); ++u) {
       const float z = depth_m.at(0, v, u);
       const float n[3] = {normals_depth.at(0, v, u), normals_depth.at(1, v, u),
                           normals_depth.at(2, v, u)};
       if (!(z > 0.0f) || !std::isfinite(z) || !isValidNormal(n[0], n[1], n[2]))
         continue;
-      Point p = transformPixel(u, v, z, n, K_depth, T_rgb_depth);
+      Point p = transformPixel(ray_x_[u], ray_y, z, n, T_rgb_depth);
       if (!(p.X_rgb[2] > 0.0)) continue;  // behind the colour camera
       // (u', v') = K_rgb P_rgb / z_rgb.
       const double u_rgb = K_rgb.fx() * p.X_rgb[0] / p.X_rgb[2] + K_rgb.cx();
