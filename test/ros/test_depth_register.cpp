@@ -4,6 +4,8 @@
 // output, and the next frame answered once tf has it; with it: normals in
 // the colour frame, at the colour size, equal to the plane's normal there; a
 // colour camera_info of the depth's frame and size: nothing registered.
+// Under depth_register.test (the nodelet's own launch file) and
+// depth_register_rgbd.test (launch/rgbd.launch register:=true).
 #include <geometry_msgs/TransformStamped.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -97,11 +99,20 @@ sensor_msgs::ImagePtr planeDepth(const std_msgs::Header& header) {
 class Client {
  public:
   Client() {
-    depth_ = nh_.advertise<sensor_msgs::Image>("depth", 10);
-    info_ = nh_.advertise<sensor_msgs::CameraInfo>("camera_info", 10);
-    rgb_info_ = nh_.advertise<sensor_msgs::CameraInfo>("rgb/camera_info", 10);
+    // The node's topics: its own names, or those of a launch file (~depth,
+    // ~camera_info, ~rgb_camera_info, ~normals).
+    const ros::NodeHandle pnh("~");
+    const auto topic = [&](const char* key, const char* name) {
+      return pnh.param<std::string>(key, name);
+    };
+    depth_ = nh_.advertise<sensor_msgs::Image>(topic("depth", "depth"), 10);
+    info_ = nh_.advertise<sensor_msgs::CameraInfo>(
+        topic("camera_info", "camera_info"), 10);
+    rgb_info_ = nh_.advertise<sensor_msgs::CameraInfo>(
+        topic("rgb_camera_info", "rgb/camera_info"), 10);
     normals_sub_ = nh_.subscribe<sensor_msgs::Image>(
-        "normals", 20, [this](const sensor_msgs::ImageConstPtr& m) {
+        topic("normals", "normals"), 20,
+        [this](const sensor_msgs::ImageConstPtr& m) {
           std::lock_guard<std::mutex> lock(mutex_);
           normals_[m->header.stamp] = m;
         });
