@@ -2,8 +2,9 @@
 // depth camera 5 cm beside the colour camera (and turned 3 degrees), the
 // transform from tf. Without the transform: an error naming both frames, no
 // output, and the next frame answered once tf has it; with it: normals in
-// the colour frame, at the colour size, equal to the plane's normal there; a
-// colour camera_info of the depth's frame and size: nothing registered.
+// the colour frame, at the colour size, equal to the plane's normal there;
+// bad colour camera_infos skipped with an error; a colour camera_info of the
+// depth's frame and size: nothing registered.
 // Under depth_register.test (the nodelet's own launch file) and
 // depth_register_rgbd.test (launch/rgbd.launch register:=true).
 #include <geometry_msgs/TransformStamped.h>
@@ -21,6 +22,7 @@
 #include <map>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/types.h"
@@ -122,22 +124,28 @@ class Client {
           if (m->level >= rosgraph_msgs::Log::ERROR) errors_.push_back(m->msg);
         });
   }
+  std::string rgbInfoTopic() const { return rgb_info_.getTopic(); }
   bool connected() const {
     return depth_.getNumSubscribers() > 0 && info_.getNumSubscribers() > 0 &&
            rgb_info_.getNumSubscribers() > 0;
   }
   /// A depth frame of the plane with both camera_infos; returns its stamp.
-  ros::Time publish(bool aligned) {
+  /// `spoil` may change the colour camera_info before it goes out.
+  ros::Time publish(
+      bool aligned,
+      const std::function<void(sensor_msgs::CameraInfo&)>& spoil = nullptr) {
     std_msgs::Header h;
     next_stamp_ += 0.1;
     h.stamp = ros::Time(next_stamp_);
     h.frame_id = kDepthFrame;
     std_msgs::Header h_rgb = h;
     if (!aligned) h_rgb.frame_id = kRgbFrame;
-    rgb_info_.publish(aligned ? nf::test::cameraInfoMessage(
-                                    kDepthK, kDepthWidth, kDepthHeight, h_rgb)
-                              : nf::test::cameraInfoMessage(kRgbK, kRgbWidth,
-                                                            kRgbHeight, h_rgb));
+    auto rgb_info = aligned ? nf::test::cameraInfoMessage(kDepthK, kDepthWidth,
+                                                          kDepthHeight, h_rgb)
+                            : nf::test::cameraInfoMessage(kRgbK, kRgbWidth,
+                                                          kRgbHeight, h_rgb);
+    if (spoil) spoil(*rgb_info);
+    rgb_info_.publish(rgb_info);
     ros::WallDuration(0.05).sleep();  // the colour camera before the depth
     info_.publish(
         nf::test::cameraInfoMessage(kDepthK, kDepthWidth, kDepthHeight, h));
@@ -207,6 +215,36 @@ int compareToNormal(const sensor_msgs::Image& msg, const double n[3],
   return valid;
 }
 
+/// Bad colour camera_infos: an error naming the topic, the frame skipped,
+/// the next good frame answered.
+void expectBadColourInfosSkipped(Client& client) {
+  const std::vector<
+      std::pair<std::function<void(sensor_msgs::CameraInfo&)>, std::string>>
+      bad = {
+          {[](sensor_msgs::CameraInfo& i) { i.width = i.height = 0; },
+           "expected the colour image's size"},
+          {[](sensor_msgs::CameraInfo& i) { i.K.fill(0.0); }, "expected K"},
+          {[](sensor_msgs::CameraInfo& i) { i.header.frame_id.clear(); },
+           "expected both optical frames"},
+      };
+  for (const auto& c : bad) {
+    const ros::Time bad_stamp = client.publish(false, c.first);
+    EXPECT_TRUE(waitFor(
+        [&] {
+          return client.loggedError({client.rgbInfoTopic(), c.second});
+        },
+        5.0))
+        << c.second;
+    sensor_msgs::ImageConstPtr next;
+    for (int k = 0; k < 10 && !next; ++k) {
+      const ros::Time stamp = client.publish(false);
+      waitFor([&] { return (next = client.normals(stamp)) != nullptr; }, 1.0);
+    }
+    EXPECT_TRUE(next) << c.second << ": next frame unanswered";
+    EXPECT_FALSE(client.normals(bad_stamp)) << c.second << ": answered";
+  }
+}
+
 TEST(DepthRegister, WaitsForTfThenGivesNormalsInTheColourCamera) {
   Client client;
   ASSERT_TRUE(waitFor([&] { return client.connected(); }, 10.0));
@@ -239,6 +277,8 @@ TEST(DepthRegister, WaitsForTfThenGivesNormalsInTheColourCamera) {
   const int valid = compareToNormal(*out, plane.n, &worst_deg);
   EXPECT_GT(valid, kRgbWidth * kRgbHeight / 2);
   EXPECT_LT(worst_deg, 0.1);
+
+  expectBadColourInfosSkipped(client);
 
   // The same frame, the colour camera_info now the depth's own: nothing is
   // registered, the plane's normal is the depth camera's, R^T n_rgb.
