@@ -20,9 +20,12 @@
 //     as or finer than the depth grid, at the cost of foreground edges up to
 //     one pixel wider. Holes larger than that stay unknown.
 //   kNearest: only the nearest colour pixel; no hole is filled, every pixel
-//     shown is hit by a depth pixel.
+//     shown is hit by a depth pixel. With T = I and K_rgb = K_depth it is the
+//     identity (k2x2 is not: a pixel also gets its neighbours' points).
 // Colour pixels that no depth pixel reaches are unknown: NaN normal, 0
-// confidence, NaN depth. No lens distortion is modelled (rectified images).
+// confidence, NaN depth. The confidence shown is the depth pixel's, not
+// re-weighted for the colour camera's view. No lens distortion is modelled
+// (rectified images).
 #pragma once
 
 #include <array>
