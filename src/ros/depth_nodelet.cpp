@@ -1,14 +1,70 @@
 #include "normal_fusion/ros/depth_nodelet.h"
 
+#include <tf2/LinearMath/Matrix3x3.h>
+#include <tf2/LinearMath/Quaternion.h>
+#include <tf2/exceptions.h>
 #include <pluginlib/class_list_macros.hpp>
 
 #include <cstring>
+#include <functional>
 #include <sstream>
 
 #include "normal_fusion/errors.h"
 
 namespace normal_fusion {
 namespace node {
+namespace {
+
+using WarnFn = std::function<void(const std::string&, const std::string&)>;
+
+/// The registration's private parameters (register_to_rgb, tf_timeout,
+/// registration_splat); a bad value keeps the default and warns.
+void readRegistrationParameters(const ros::NodeHandle& pnh,
+                                DepthNodeSettings* s, const WarnFn& warn) {
+  bool register_to_rgb;
+  if (pnh.getParam("register_to_rgb", register_to_rgb)) {
+    s->register_to_rgb = register_to_rgb;
+  } else if (pnh.hasParam("register_to_rgb")) {
+    warn("register_to_rgb", "expected a boolean");
+  }
+  if (pnh.hasParam("tf_timeout")) {
+    double timeout = -1.0;
+    int timeout_int;
+    if (!pnh.getParam("tf_timeout", timeout) &&
+        pnh.getParam("tf_timeout", timeout_int)) {
+      timeout = timeout_int;
+    }
+    if (timeout >= 0.0 && timeout <= 10.0) {
+      s->tf_timeout = timeout;
+    } else {
+      warn("tf_timeout", "expected a number of seconds in [0, 10]");
+    }
+  }
+  std::string splat;
+  if (pnh.getParam("registration_splat", splat)) {
+    try {
+      s->registration.splat = depth::splatFromString(splat);
+    } catch (const Error& e) {
+      warn("registration_splat", e.what());
+    }
+  } else if (pnh.hasParam("registration_splat")) {
+    warn("registration_splat", "expected a string (2x2 or nearest)");
+  }
+}
+
+/// R and t of a tf2 transform (p_target = R p_source + t).
+depth::RigidTransform rigidTransformOf(const geometry_msgs::Transform& T) {
+  const tf2::Matrix3x3 R(
+      tf2::Quaternion(T.rotation.x, T.rotation.y, T.rotation.z, T.rotation.w));
+  depth::RigidTransform out;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out.R[3 * r + c] = R[r][c];
+  }
+  out.t = {T.translation.x, T.translation.y, T.translation.z};
+  return out;
+}
+
+}  // namespace
 
 DepthNodeSettings depthSettingsFromParameters(
     const ros::NodeHandle& pnh, std::vector<std::string>* warnings) {
@@ -71,6 +127,7 @@ DepthNodeSettings depthSettingsFromParameters(
   integer("num_threads", &n.num_threads, 1, 256);
   integer("queue_size", &s.queue_size, 1, 100);
   integer("max_pixels", &s.max_pixels, 0, 2000000000);
+  readRegistrationParameters(pnh, &s, warn);
   return s;
 }
 
@@ -86,6 +143,9 @@ void writeDepthParameters(const DepthNodeSettings& s, ros::NodeHandle& pnh) {
   pnh.setParam("num_threads", n.num_threads);
   pnh.setParam("queue_size", s.queue_size);
   pnh.setParam("max_pixels", s.max_pixels);
+  pnh.setParam("register_to_rgb", s.register_to_rgb);
+  pnh.setParam("tf_timeout", s.tf_timeout);
+  pnh.setParam("registration_splat", depth::toString(s.registration.splat));
 }
 
 void depthFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
@@ -143,6 +203,12 @@ void DepthToNormalsNodelet::onInit() {
   limits_.max_pixels = static_cast<std::uint64_t>(settings_.max_pixels);
   topic_names_[kDepth] = nh.resolveName("depth");
   topic_names_[kCameraInfo] = nh.resolveName("camera_info");
+  topic_names_[kRgbCameraInfo] = nh.resolveName("rgb/camera_info");
+  registration_.setSettings(settings_.registration);
+  if (settings_.register_to_rgb) {
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_);
+  }
   Synchronizer::Options options;
   options.approximate = false;  // a depth image and its camera_info
   options.queue_size = settings_.queue_size;
@@ -159,24 +225,34 @@ void DepthToNormalsNodelet::onInit() {
       };
   pub_normals_ = it_->advertise("normals", 1, cb, cb);
   pub_confidence_ = it_->advertise("confidence", 1, cb, cb);
+  if (settings_.register_to_rgb) {
+    pub_depth_registered_ =
+        it_->advertise("depth_registered/image_rect", 1, cb, cb);
+  }
   const depth::DepthNormalSettings& n = settings_.normals;
   NODELET_INFO(
       "depth_to_normals: %s (window radius %d), noise coefficient %g /m; "
-      "inputs %s %s",
+      "inputs %s %s%s%s",
       depth::toString(n.method).c_str(), n.window_radius, n.noise_coefficient,
-      topic_names_[kDepth].c_str(), topic_names_[kCameraInfo].c_str());
+      topic_names_[kDepth].c_str(), topic_names_[kCameraInfo].c_str(),
+      settings_.register_to_rgb ? "; registered into the colour camera of "
+                                : "",
+      settings_.register_to_rgb ? topic_names_[kRgbCameraInfo].c_str() : "");
 }
 
 void DepthToNormalsNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
   const bool wanted = pub_normals_.getNumSubscribers() > 0 ||
-                      pub_confidence_.getNumSubscribers() > 0;
+                      pub_confidence_.getNumSubscribers() > 0 ||
+                      pub_depth_registered_.getNumSubscribers() > 0;
   if (!wanted && subscribed_) {
     sub_depth_.shutdown();
     sub_info_.shutdown();
+    sub_rgb_info_.shutdown();
     subscribed_ = false;
     std::lock_guard<std::mutex> sync_lock(sync_mutex_);
     sync_->reset();
+    rgb_info_.reset();
     NODELET_DEBUG("no subscribers: inputs unsubscribed");
     return;
   }
@@ -196,7 +272,25 @@ void DepthToNormalsNodelet::connectCb() {
       };
   sub_info_ =
       getNodeHandle().subscribe("camera_info", settings_.queue_size, info_cb);
+  if (settings_.register_to_rgb) {
+    sub_rgb_info_ = getNodeHandle().subscribe(
+        "rgb/camera_info", 1, &DepthToNormalsNodelet::onRgbInfo, this);
+  }
   subscribed_ = true;
+}
+
+void DepthToNormalsNodelet::onRgbInfo(
+    const sensor_msgs::CameraInfoConstPtr& msg) {
+  try {
+    precheckMessage(topic_names_[kRgbCameraInfo], msg->header, nullptr,
+                    limits_);
+  } catch (const std::exception& e) {
+    ++frames_skipped_;
+    logThrottled(std::string(e.what()) + "; message skipped");
+    return;
+  }
+  std::lock_guard<std::mutex> lock(sync_mutex_);
+  rgb_info_ = msg;  // the newest colour camera
 }
 
 void DepthToNormalsNodelet::onMessage(int topic, const std_msgs::Header& header,
@@ -226,8 +320,10 @@ void DepthToNormalsNodelet::handleMessage(int topic,
   }
   std::vector<Synchronizer::Set> sets;
   std::vector<Synchronizer::Discard> discards;
+  sensor_msgs::CameraInfoConstPtr rgb_info;
   {
     std::lock_guard<std::mutex> lock(sync_mutex_);
+    rgb_info = rgb_info_;
     const auto result = sync_->add(topic, header.stamp.toNSec(), message);
     if (result == Synchronizer::AddResult::kOutOfOrder) {
       std::ostringstream text;
@@ -258,7 +354,9 @@ void DepthToNormalsNodelet::handleMessage(int topic,
   std::optional<Work> newest;
   for (const Synchronizer::Set& set : sets) {
     try {
-      newest = checkedWork(set.messages[kDepth], set.messages[kCameraInfo]);
+      Work work = checkedWork(set.messages[kDepth], set.messages[kCameraInfo]);
+      addColourCamera(work, rgb_info);
+      newest = std::move(work);
     } catch (const Error& e) {
       ++frames_skipped_;
       logThrottled(std::string(e.what()) + "; frame skipped");
@@ -319,18 +417,88 @@ void DepthToNormalsNodelet::workerLoop() {
   }
 }
 
+void DepthToNormalsNodelet::addColourCamera(
+    Work& work, const sensor_msgs::CameraInfoConstPtr& rgb_info) const {
+  if (!settings_.register_to_rgb) return;
+  const std::string& name = topic_names_[kRgbCameraInfo];
+  if (!rgb_info) {
+    throw InputError(name +
+                     ": no colour camera_info received yet; expected one "
+                     "before a depth image can be registered");
+  }
+  const sensor_msgs::CameraInfo& info = *rgb_info;
+  if (info.width == 0 || info.height == 0) {
+    throw InputError(name + ": size " + std::to_string(info.width) + "x" +
+                     std::to_string(info.height) +
+                     "; expected the colour image's size");
+  }
+  const std::uint64_t pixels =
+      static_cast<std::uint64_t>(info.width) * info.height;
+  if (limits_.max_pixels > 0 && pixels > limits_.max_pixels) {
+    throw InputError(name + ": " + std::to_string(pixels) +
+                     " pixels; expected at most max_pixels = " +
+                     std::to_string(limits_.max_pixels));
+  }
+  const int width = static_cast<int>(info.width);
+  const int height = static_cast<int>(info.height);
+  const CameraIntrinsics K_rgb =
+      intrinsicsFromCameraInfo(info, name, width, height);
+  const std::string& depth_frame = work.depth->header.frame_id;
+  if (info.header.frame_id == depth_frame && info.width == work.depth->width &&
+      info.height == work.depth->height) {
+    return;  // already aligned: the depth lives in the colour image's pixels
+  }
+  if (info.header.frame_id.empty() || depth_frame.empty()) {
+    throw InputError(name + ": frame_id '" + info.header.frame_id +
+                     "', depth frame_id '" + depth_frame +
+                     "'; expected both optical frames for the registration");
+  }
+  work.rgb_info = rgb_info;
+  work.rgb = depth::TargetCamera{K_rgb, width, height};
+}
+
+depth::RigidTransform DepthToNormalsNodelet::lookupRgbFromDepth(
+    const Work& work) const {
+  const std::string& rgb_frame = work.rgb_info->header.frame_id;
+  const std::string& depth_frame = work.depth->header.frame_id;
+  if (rgb_frame == depth_frame) return depth::RigidTransform();
+  try {
+    const geometry_msgs::TransformStamped T = tf_buffer_->lookupTransform(
+        rgb_frame, depth_frame, work.depth->header.stamp,
+        ros::Duration(settings_.tf_timeout));
+    return rigidTransformOf(T.transform);
+  } catch (const tf2::TransformException& e) {
+    std::ostringstream text;
+    text << "tf: no transform to the colour frame '" << rgb_frame
+         << "' from the depth frame '" << depth_frame
+         << "' at the depth's stamp " << work.depth->header.stamp
+         << " within tf_timeout " << settings_.tf_timeout << " s (" << e.what()
+         << ")";
+    throw InputError(text.str());
+  }
+}
+
 void DepthToNormalsNodelet::process(const Work& work) {
   const sensor_msgs::Image& msg = *work.depth;
   const CameraIntrinsics& K = work.K;
   depthFromMessage(msg, topic_names_[kDepth], depth_m_);
   const bool want_normals = pub_normals_.getNumSubscribers() > 0;
   const bool want_confidence = pub_confidence_.getNumSubscribers() > 0;
-  if (!want_normals && !want_confidence) return;
+  const bool want_depth = pub_depth_registered_.getNumSubscribers() > 0;
+  if (!want_normals && !want_confidence && !want_depth) return;
+  // The transform first: without it the frame is skipped before any work.
+  const depth::RigidTransform T_rgb_depth =
+      work.rgb_info ? lookupRgbFromDepth(work) : depth::RigidTransform();
   try {
     estimator_.compute(depth_m_, K, normals_,
                        want_confidence ? &confidence_ : nullptr);
   } catch (const Error& e) {
     throw InputError(topic_names_[kDepth] + ": " + e.what());
+  }
+  if (work.rgb_info) {
+    publishRegistered(work, T_rgb_depth, want_normals, want_confidence,
+                      want_depth);
+    return;
   }
   if (want_normals) {
     auto out = boost::make_shared<sensor_msgs::Image>();
@@ -341,6 +509,43 @@ void DepthToNormalsNodelet::process(const Work& work) {
     auto out = boost::make_shared<sensor_msgs::Image>();
     scalarMapToMessage(confidence_, msg.header, *out);
     pub_confidence_.publish(out);
+  }
+  if (want_depth) {  // aligned: the depth is the registered depth
+    auto out = boost::make_shared<sensor_msgs::Image>();
+    scalarMapToMessage(depth_m_, msg.header, *out);
+    pub_depth_registered_.publish(out);
+  }
+}
+
+void DepthToNormalsNodelet::publishRegistered(
+    const Work& work, const depth::RigidTransform& T_rgb_depth,
+    bool want_normals, bool want_confidence, bool want_depth) {
+  try {
+    registration_.registerNormals(depth_m_, normals_,
+                                  want_confidence ? &confidence_ : nullptr,
+                                  work.K, work.rgb, T_rgb_depth, normals_rgb_,
+                                  want_confidence ? &confidence_rgb_ : nullptr,
+                                  want_depth ? &depth_rgb_ : nullptr);
+  } catch (const Error& e) {
+    throw InputError(topic_names_[kDepth] + ": registration: " + e.what());
+  }
+  // The colour camera's frame and pixels, the depth's time.
+  std_msgs::Header header = work.depth->header;
+  header.frame_id = work.rgb_info->header.frame_id;
+  if (want_normals) {
+    auto out = boost::make_shared<sensor_msgs::Image>();
+    normalsToMessage(normals_rgb_, header, *out);
+    pub_normals_.publish(out);
+  }
+  if (want_confidence) {
+    auto out = boost::make_shared<sensor_msgs::Image>();
+    scalarMapToMessage(confidence_rgb_, header, *out);
+    pub_confidence_.publish(out);
+  }
+  if (want_depth) {
+    auto out = boost::make_shared<sensor_msgs::Image>();
+    scalarMapToMessage(depth_rgb_, header, *out);
+    pub_depth_registered_.publish(out);
   }
 }
 

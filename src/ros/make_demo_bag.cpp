@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/registration.h"
 #include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/synthetic.h"
 
@@ -169,11 +170,10 @@ nf::ScalarMap smoothDepth(const nf::ScalarMap& depth) {
   return out;
 }
 
-/// Moves normals computed on a depth map of camera "d" into camera "c":
-/// each valid pixel is back-projected with its depth, transformed by
-/// (R_c_d, t_c_d), projected with K_c into a width x height image (z-buffer,
-/// 2x2 footprint to close the gaps of the finer target grid), its normal
-/// rotated by R_c_d.
+/// Moves normals computed on a depth map of camera "d" into camera "c"
+/// (registration.h): z-buffer, 2x2 footprint to close the gaps of the finer
+/// target grid, normals rotated by R_c_d and not turned toward camera "c"
+/// (the demo's estimates are the depth camera's normals, rotated).
 nf::NormalMap registerNormals(const nf::NormalMap& normals_d,
                               const nf::ScalarMap& depth_d,
                               const nf::CameraIntrinsics& K_d,
@@ -181,46 +181,14 @@ nf::NormalMap registerNormals(const nf::NormalMap& normals_d,
                               const std::array<double, 3>& t_c_d,
                               const nf::CameraIntrinsics& K_c, int width,
                               int height) {
-  nf::NormalMap out(width, height, 3, kNaN);
-  nf::ScalarMap zbuffer(width, height, 1, std::numeric_limits<float>::max());
-  for (int v = 0; v < depth_d.height(); ++v) {
-    for (int u = 0; u < depth_d.width(); ++u) {
-      const float z = depth_d.at(0, v, u);
-      const float n[3] = {normals_d.at(0, v, u), normals_d.at(1, v, u),
-                          normals_d.at(2, v, u)};
-      if (!std::isfinite(z) || !nf::isValidNormal(n[0], n[1], n[2])) continue;
-      // X_d = z K_d^-1 (u, v, 1).
-      const double X_d[3] = {(u - K_d.cx()) / K_d.fx() * z,
-                             (v - K_d.cy()) / K_d.fy() * z, z};
-      // X_c = R_c_d X_d + t_c_d, n_c = R_c_d n_d.
-      double X_c[3], n_c[3];
-      for (int r = 0; r < 3; ++r) {
-        X_c[r] = t_c_d[r];
-        n_c[r] = 0.0;
-        for (int k = 0; k < 3; ++k) {
-          X_c[r] += R_c_d[3 * r + k] * X_d[k];
-          n_c[r] += R_c_d[3 * r + k] * n[k];
-        }
-      }
-      if (X_c[2] <= 0.0) continue;
-      // (u', v') = K_c X_c / z_c, splatted on the 2x2 pixels around it.
-      const double uc = K_c.fx() * X_c[0] / X_c[2] + K_c.cx();
-      const double vc = K_c.fy() * X_c[1] / X_c[2] + K_c.cy();
-      const int u0 = static_cast<int>(std::floor(uc));
-      const int v0 = static_cast<int>(std::floor(vc));
-      for (int dv = 0; dv <= 1; ++dv) {
-        for (int du = 0; du <= 1; ++du) {
-          const int x = u0 + du, y = v0 + dv;
-          if (x < 0 || y < 0 || x >= width || y >= height) continue;
-          if (X_c[2] >= zbuffer.at(0, y, x)) continue;
-          zbuffer.at(0, y, x) = static_cast<float>(X_c[2]);
-          for (int c = 0; c < 3; ++c) {
-            out.at(c, y, x) = static_cast<float>(n_c[c]);
-          }
-        }
-      }
-    }
-  }
+  nf::depth::RegistrationSettings settings;
+  settings.splat = nf::depth::Splat::k2x2;
+  settings.face_camera = false;
+  nf::NormalMap out;
+  nf::depth::registerNormals(depth_d, normals_d, nullptr, K_d,
+                             nf::depth::TargetCamera{K_c, width, height},
+                             nf::depth::RigidTransform{R_c_d, t_c_d}, settings,
+                             out, nullptr);
   return out;
 }
 

@@ -280,6 +280,15 @@ TEST(DepthNode, RefusedParametersKeepTheirDefaults) {
   EXPECT_EQ(window_radius, 2);
   EXPECT_DOUBLE_EQ(noise_coefficient, 0.0025);
   EXPECT_DOUBLE_EQ(edge_distance, 3.0);
+  bool register_to_rgb = true;
+  double tf_timeout = 0.0;
+  std::string splat;
+  EXPECT_TRUE(pnh.getParam("register_to_rgb", register_to_rgb));
+  EXPECT_TRUE(pnh.getParam("tf_timeout", tf_timeout));
+  EXPECT_TRUE(pnh.getParam("registration_splat", splat));
+  EXPECT_FALSE(register_to_rgb);
+  EXPECT_DOUBLE_EQ(tf_timeout, 0.1);
+  EXPECT_EQ(splat, "2x2");
 }
 
 struct BadCase {

@@ -3,6 +3,14 @@
 // stamp, and computes the normals and their confidence on a worker thread
 // (newest frame wins); publishes `normals` (32FC3) and `confidence` (32FC1)
 // with the depth's header. A thin adapter around depth::DepthNormalEstimator.
+//
+// With `register_to_rgb` it also keeps the newest `rgb/camera_info` (the
+// colour camera's) and registers the normals into the colour image
+// (depth::DepthRegistration) with T_rgb_depth from tf2 at the depth's stamp;
+// the outputs then carry the colour camera's frame_id and size (and the
+// depth's stamp), and `depth_registered/image_rect` (32FC1, metres) the depth
+// of the surface shown. A colour camera_info with the depth's frame_id and
+// size means the depth is already aligned: nothing is registered.
 #pragma once
 
 #include <image_transport/image_transport.h>
@@ -10,6 +18,8 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
 
 #include <atomic>
 #include <condition_variable>
@@ -22,6 +32,7 @@
 #include <vector>
 
 #include "normal_fusion/depth.h"
+#include "normal_fusion/registration.h"
 #include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/ros/log_throttle.h"
 #include "normal_fusion/ros/pipeline.h"
@@ -35,6 +46,11 @@ struct DepthNodeSettings {
   depth::DepthNormalSettings normals;
   int queue_size = 5;  ///< per input topic, 1 .. 100
   int max_pixels = kDefaultMaxPixels;
+  /// Register into the colour camera of `rgb/camera_info`.
+  bool register_to_rgb = false;
+  /// How long to wait for T_rgb_depth at a depth stamp (s), 0 .. 10.
+  double tf_timeout = 0.1;
+  depth::RegistrationSettings registration;
 };
 
 /// Reads the private parameters; a value out of range (or of the wrong type)
@@ -63,7 +79,7 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
 
  private:
   using Synchronizer = StampSynchronizer<QueuedMessage>;
-  enum Topic { kDepth = 0, kCameraInfo = 1 };
+  enum Topic { kDepth = 0, kCameraInfo = 1, kRgbCameraInfo = 2 };
 
   void onInit() override;
   void connectCb();
@@ -71,32 +87,53 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
                  const QueuedMessage& message);
   void handleMessage(int topic, const std_msgs::Header& header,
                      const QueuedMessage& message);
-  /// A checked pair: the depth image and its intrinsics.
+  /// A checked pair: the depth image and its intrinsics, and the colour
+  /// camera to register into (null rgb_info: none, already aligned).
   struct Work {
     sensor_msgs::ImageConstPtr depth;
     CameraIntrinsics K;
+    sensor_msgs::CameraInfoConstPtr rgb_info;
+    depth::TargetCamera rgb;
   };
   /// The checks of a pair that need no conversion (encoding, frames, K);
   /// throws InputError naming the topic.
   Work checkedWork(const QueuedMessage& depth, const QueuedMessage& info) const;
+  /// Adds the colour camera to a checked pair when registering; throws
+  /// InputError naming the topic.
+  void addColourCamera(Work& work,
+                       const sensor_msgs::CameraInfoConstPtr& rgb_info) const;
+  void onRgbInfo(const sensor_msgs::CameraInfoConstPtr& msg);
   void workerLoop();
   void process(const Work& work);
+  /// T_rgb_depth from tf2 at the depth's stamp; throws InputError naming
+  /// both frames when it is not there within tf_timeout.
+  depth::RigidTransform lookupRgbFromDepth(const Work& work) const;
+  void publishRegistered(const Work& work,
+                         const depth::RigidTransform& T_rgb_depth,
+                         bool want_normals, bool want_confidence,
+                         bool want_depth);
   void logThrottled(const std::string& text);
 
   DepthNodeSettings settings_;
   MessageLimits limits_;
-  std::string topic_names_[2];
+  std::string topic_names_[3];
 
   std::mutex connect_mutex_;
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Publisher pub_normals_;
   image_transport::Publisher pub_confidence_;
+  image_transport::Publisher pub_depth_registered_;  ///< register_to_rgb only
   image_transport::Subscriber sub_depth_;
   ros::Subscriber sub_info_;
+  ros::Subscriber sub_rgb_info_;
   bool subscribed_ = false;
 
   std::mutex sync_mutex_;
   std::unique_ptr<Synchronizer> sync_;
+  sensor_msgs::CameraInfoConstPtr rgb_info_;  ///< newest; under sync_mutex_
+
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;  ///< register_to_rgb only
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
 
   std::mutex work_mutex_;
   std::condition_variable work_cv_;
@@ -107,6 +144,10 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
   ScalarMap depth_m_;                      ///< the worker's buffers
   NormalMap normals_;
   ScalarMap confidence_;
+  depth::DepthRegistration registration_;  ///< used by the worker only
+  NormalMap normals_rgb_;
+  ScalarMap confidence_rgb_;
+  ScalarMap depth_rgb_;
 
   LogThrottle log_throttle_{5.0};
   std::atomic<std::uint64_t> frames_skipped_{0};

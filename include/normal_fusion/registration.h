@@ -1,0 +1,123 @@
+// Registration of depth-camera normals into the colour image (no ROS).
+//
+// When depth and colour come from two cameras, the normals computed in the
+// depth camera's optical frame are moved into the colour camera: every depth
+// pixel with a depth and a normal is back-projected, P_depth = z K_depth^-1
+// (u, v, 1), transformed, P_rgb = R P_depth + t (T_rgb_depth, metres), and
+// projected with K_rgb into the colour image; its normal is rotated, n_rgb =
+// R n_depth, and flipped where it faces away from the colour camera (n_rgb .
+// P_rgb > 0), so that the convention of depth.h (normals face the camera)
+// holds in the colour frame too.
+//
+// Occlusion: a z-buffer keeps, per colour pixel, the surface nearest to the
+// colour camera (smallest z_rgb); a depth pixel without a normal is not
+// projected and hides nothing.
+//
+// Footprint (Splat):
+//   k2x2: each point is written to the 2x2 colour pixels around its
+//     projection (the four nearest pixel centres), under the z-buffer; this
+//     closes the one-pixel cracks that appear when the colour grid is as fine
+//     as or finer than the depth grid, at the cost of foreground edges up to
+//     one pixel wider. Holes larger than that stay unknown.
+//   kNearest: only the nearest colour pixel; no hole is filled, every pixel
+//     shown is hit by a depth pixel. With T = I and K_rgb = K_depth it is the
+//     identity (k2x2 is not: a pixel also gets its neighbours' points).
+// Colour pixels that no depth pixel reaches are unknown: NaN normal, 0
+// confidence, NaN depth. The confidence shown is the depth pixel's, not
+// re-weighted for the colour camera's view. No lens distortion is modelled
+// (rectified images).
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "normal_fusion/types.h"
+
+namespace normal_fusion {
+namespace depth {
+
+/// A rigid transform p_b = R p_a + t; R row-major, t in metres.
+struct RigidTransform {
+  std::array<double, 9> R{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+  std::array<double, 3> t{{0, 0, 0}};
+
+  /// Throws ParameterError unless every value is finite and R is a rotation
+  /// (R R^T = I and det R = 1, within 1e-6).
+  void validate() const;
+};
+
+/// How a projected depth pixel covers the colour image (header comment).
+enum class Splat {
+  kNearest,  ///< "nearest"
+  k2x2,      ///< "2x2"
+};
+
+/// "nearest" or "2x2"; throws ParameterError otherwise.
+Splat splatFromString(const std::string& name);
+std::string toString(Splat splat);
+
+struct RegistrationSettings {
+  Splat splat = Splat::k2x2;
+  /// Flip normals that face away from the colour camera after the rotation.
+  bool face_camera = true;
+};
+
+/// The colour camera: intrinsics (pinhole, no skew) and image size.
+struct TargetCamera {
+  CameraIntrinsics K;
+  int width = 0;
+  int height = 0;
+};
+
+/// Registers depth-camera normals into a colour camera; keeps its z-buffer
+/// between frames (no allocation when the colour size stays the same).
+class DepthRegistration {
+ public:
+  explicit DepthRegistration(
+      const RegistrationSettings& settings = RegistrationSettings())
+      : settings_(settings) {}
+
+  void setSettings(const RegistrationSettings& settings) {
+    settings_ = settings;
+  }
+  const RegistrationSettings& settings() const { return settings_; }
+
+  /// depth_m: one plane, metres, NaN (or <= 0, non-finite) = no depth;
+  /// normals_depth: three planes at the depth's size, in the depth optical
+  /// frame; confidence_depth: one plane at that size, or null. Writes
+  /// normals_rgb (3 planes), and, when given, confidence_rgb (requires
+  /// confidence_depth; the confidence of the pixel shown) and depth_rgb (the
+  /// z_rgb of the surface shown), all at the colour size. Throws InputError
+  /// for mismatched sizes, an unusable K (skew included) or a colour size
+  /// below 1 x 1, ParameterError for a T_rgb_depth that is not a rotation
+  /// and translation.
+  void registerNormals(const ScalarMap& depth_m, const NormalMap& normals_depth,
+                       const ScalarMap* confidence_depth,
+                       const CameraIntrinsics& K_depth, const TargetCamera& rgb,
+                       const RigidTransform& T_rgb_depth,
+                       NormalMap& normals_rgb, ScalarMap* confidence_rgb,
+                       ScalarMap* depth_rgb = nullptr);
+
+ private:
+  void check(const ScalarMap& depth_m, const NormalMap& normals_depth,
+             const ScalarMap* confidence_depth, const CameraIntrinsics& K_depth,
+             const TargetCamera& rgb, const RigidTransform& T_rgb_depth,
+             const ScalarMap* confidence_rgb) const;
+
+  RegistrationSettings settings_;
+  ScalarMap zbuffer_;          ///< z_rgb of the surface shown per colour pixel
+  std::vector<double> ray_x_;  ///< (u - cx) / fx per depth column
+};
+
+/// One-shot form of DepthRegistration::registerNormals.
+void registerNormals(const ScalarMap& depth_m, const NormalMap& normals_depth,
+                     const ScalarMap* confidence_depth,
+                     const CameraIntrinsics& K_depth, const TargetCamera& rgb,
+                     const RigidTransform& T_rgb_depth,
+                     const RegistrationSettings& settings,
+                     NormalMap& normals_rgb, ScalarMap* confidence_rgb,
+                     ScalarMap* depth_rgb = nullptr);
+
+}  // namespace depth
+}  // namespace normal_fusion
