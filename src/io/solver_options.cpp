@@ -176,12 +176,11 @@ void applySolverOption(const std::string& option, const std::string& value,
 void printSolverOptions(std::ostream& out, const SolverSettings& defaults) {
   for (const Option& option : options()) {
     const SettingDescriptor& d = *option.descriptor;
-    std::string head = "  " + d.cliOption() + " " + valueHint(d);
-    head.resize(std::max<std::size_t>(head.size() + 1, 34), ' ');
-    out << head << d.meaning;
+    out << "  " << d.cliOption() << " " << valueHint(d) << "  ["
+        << option.show(defaults) << "]";
+    if (!d.old_option.empty()) out << "  (was " << d.old_option << ")";
+    out << "\n      " << d.meaning;
     if (d.numeric()) out << "; " << d.rangeText();
-    out << " [" << option.show(defaults) << "]";
-    if (!d.old_option.empty()) out << " (was " << d.old_option << ")";
     out << "\n";
   }
 }
