@@ -128,8 +128,8 @@ const std::vector<SettingDescriptor>& nodeSettingDescriptors();
 /// or the diagnostics and are read at start only.
 bool isDynamicParameter(const std::string& name);
 
-/// The range a numeric parameter accepts (inclusive; an open lower bound of 0
-/// is the smallest positive double).
+/// The range a numeric parameter accepts (inclusive; an open lower bound is
+/// the next double above it: the smallest positive double for 0).
 struct ParameterRange {
   std::string name;
   double min, max;
