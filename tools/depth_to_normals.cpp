@@ -67,7 +67,8 @@ void printUsage(std::ostream& out) {
       << "  --edge-distance R            confidence ramp from an edge, "
          "pixels ["
       << d.edge_distance << "]\n"
-      << "  --threads N                  threads [" << d.num_threads << "]\n"
+      << "  --num-threads N              threads, 0 = all [" << d.num_threads
+      << "] (was --threads)\n"
       << "  --help                       this text\n"
       << "\n"
       << "Exit codes: 0 success, 1 unusable input, 2 usage error.\n";
@@ -141,7 +142,13 @@ Options parseArguments(int argc, char** argv) {
       s.normal_sigma_scale = number(option, value);
     } else if (option == "--edge-distance") {
       s.edge_distance = number(option, value);
-    } else if (option == "--threads") {
+    } else if (option == "--num-threads" || option == "--threads") {
+      // --threads: the spelling before the options followed the parameter
+      // names of the depth nodelet.
+      if (option == "--threads") {
+        std::cerr << "depth_to_normals: warning: --threads is deprecated; "
+                     "use --num-threads\n";
+      }
       s.num_threads = integer(option, value);
     } else {
       throw UsageError("unknown option '" + option + "' (see --help)");

@@ -27,6 +27,7 @@
 #include "normal_fusion/errors.h"
 #include "normal_fusion/io.h"
 #include "normal_fusion/settings.h"
+#include "normal_fusion/settings_table.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/solver_options.h"
 #include "normal_fusion/types.h"
@@ -60,6 +61,7 @@ struct Options {
   std::vector<InputSpec> inputs;
   nf::SolverSettings settings;
   bool help = false;
+  bool print_markdown = false;  ///< print the settings table and exit
 };
 
 void printUsage(std::ostream& out) {
@@ -90,8 +92,10 @@ void printUsage(std::ostream& out) {
          "\n"
          "Solver options (defaults in brackets):\n";
   nf::cli::printSolverOptions(out, d);
-  out << "  --no-edges            same as --edges off\n"
-      << "  --help                this text\n"
+  out << "  --no-edges                      same as --edge-enabled off\n"
+      << "  --print-settings-markdown       the solver settings' table of "
+         "docs/parameters.md\n"
+      << "  --help                          this text\n"
       << "\n"
       << "Exit codes: 0 success, 1 unusable input, 2 usage error.\n";
 }
@@ -139,9 +143,11 @@ Options parseArguments(int argc, char** argv) {
       has_inline_value = true;
     }
     // Flags without a value.
-    if (option == "--help" || option == "--no-edges") {
+    if (option == "--help" || option == "--no-edges" ||
+        option == "--print-settings-markdown") {
       if (has_inline_value) throw UsageError(option + " takes no value");
       if (option == "--help") options.help = true;
+      if (option == "--print-settings-markdown") options.print_markdown = true;
       if (option == "--no-edges") s.edges.enabled = false;
       continue;
     }
@@ -181,8 +187,14 @@ Options parseArguments(int argc, char** argv) {
       input.orientation = parseName(option, input.orientation_name,
                                     nf::Orientation::fromString);
     } else if (nf::cli::isSolverOption(option)) {
+      const std::string replacement = nf::cli::replacementOption(option);
+      if (!replacement.empty()) {
+        std::cerr << "fuse_normals: warning: " << option
+                  << " is deprecated; use " << replacement << "\n";
+      }
       try {
-        nf::cli::applySolverOption(option, value(), s);
+        std::ostream no_warnings(nullptr);  // printed above, with the prefix
+        nf::cli::applySolverOption(option, value(), s, no_warnings);
       } catch (const nf::ParameterError& e) {
         throw UsageError(e.what());
       }
@@ -190,7 +202,7 @@ Options parseArguments(int argc, char** argv) {
       throw UsageError("unknown option '" + option + "' (see --help)");
     }
   }
-  if (options.help) return options;
+  if (options.help || options.print_markdown) return options;
   if (options.image_path.empty()) throw UsageError("missing --image");
   if (options.camera_info_path.empty()) {
     throw UsageError("missing --camera-info");
@@ -418,6 +430,10 @@ int run(int argc, char** argv) {
   const Options options = parseArguments(argc, argv);
   if (options.help) {
     printUsage(std::cout);
+    return 0;
+  }
+  if (options.print_markdown) {
+    nf::printSettingsMarkdown(std::cout, nf::solverSettingDescriptors(), true);
     return 0;
   }
   checkOutputDirectory(options.output_path);

@@ -1,6 +1,7 @@
 // Every setting of the solver in one plain struct with documented defaults.
 #pragma once
 
+#include <climits>
 #include <string>
 
 namespace normal_fusion {
@@ -43,27 +44,46 @@ enum class SolverBackend {
                ///< against
 };
 
+/// The defaults of the settings table (detail/settings_table.def), by
+/// parameter name: the fields below start from these.
+namespace settings_default {
+#define NF_DOUBLE(name, field, def, lo, hi, when, meaning, old) \
+  constexpr double name = def;
+#define NF_DOUBLE_ABOVE(name, field, def, lo, hi, when, meaning, old) \
+  constexpr double name = def;
+#define NF_INT(name, field, def, lo, hi, when, meaning, old) \
+  constexpr int name = def;
+#define NF_BOOL(name, field, def, when, meaning, old) constexpr bool name = def;
+#define NF_ENUM(name, field, def, Type, values, when, meaning, old) \
+  constexpr Type name = Type::def;
+#include "normal_fusion/detail/settings_table.def"
+}  // namespace settings_default
+
 struct EdgeWeightSettings {
-  bool enabled = true;  ///< false: w_h = w_v = 1 (plain, unguided TV)
+  bool enabled = settings_default::edge_enabled;  ///< false: w_h = w_v = 1
+                                                  ///< (plain, unguided TV)
   /// Gaussian pre-smoothing of the guide in pixels (0: none). Raise it to
   /// 0.5 - 1 for guides with visible sensor noise.
-  double smoothing_sigma = 0.0;
-  double alpha = 15.0;
-  double beta = 1.0;
-  double w_min = 0.1;  ///< floor of the weights, in [0, 1]
-  EdgeColorMode color_mode = EdgeColorMode::kColorMax;
-  EdgeWeightFunction function = EdgeWeightFunction::kExponential;
-  EdgeGradient gradient = EdgeGradient::kForwardDifference;
+  double smoothing_sigma = settings_default::edge_smoothing_sigma;
+  double alpha = settings_default::edge_alpha;
+  double beta = settings_default::edge_beta;
+  double w_min =
+      settings_default::edge_w_min;  ///< floor of the weights, in [0, 1]
+  EdgeColorMode color_mode = settings_default::edge_color_mode;
+  EdgeWeightFunction function = settings_default::edge_function;
+  EdgeGradient gradient = settings_default::edge_gradient;
 };
 
 struct SolverSettings {
   // Model.
   // Defaults: the best set found by `evaluate` on the synthetic scenes (the
-  // paper used lambda = 1, eps = 0.05 with Sobel weights; see docs/accuracy.md).
-  double lambda = 0.5;     ///< global data weight (the paper's lambda)
-  double huber_eps = 0.0;  ///< Huber threshold; 0 = plain total variation
-  DataPenalty penalty = DataPenalty::kL2;
-  VisibilityMode visibility = VisibilityMode::kSoft;
+  // paper's own settings: docs/accuracy.md).
+  double lambda =
+      settings_default::lambda;  ///< global data weight (the paper's lambda)
+  double huber_eps = settings_default::huber_eps;  ///< Huber threshold; 0 =
+                                                   ///< plain total variation
+  DataPenalty penalty = settings_default::penalty;
+  VisibilityMode visibility = settings_default::visibility;
   EdgeWeightSettings edges;
   /// Huber threshold delta(x) of the unsquared data terms (penalty l2), per
   /// pixel and input: c huber_delta(|n - f|), quadratic below delta (Gaussian
@@ -77,24 +97,23 @@ struct SolverSettings {
   /// and sparse inputs keep the robust one. Computed from the inputs before
   /// the solve, so the energy stays convex and the outer loop monotone.
   /// Ignored with the squared penalty.
-  double data_eps = 0.0;
-  double data_eps_local = 1.0;
+  double data_eps = settings_default::data_eps;
+  double data_eps_local = settings_default::data_eps_local;
   /// Density correction of the data weights: c(x) *= (window / valid)^p, the
   /// count of the input's valid pixels in the window around x. A sample of a
   /// sparse input stands for the pixels around it that the input misses, so
   /// a sparse, accurate input is not outvoted by a dense, noisy one; dense
   /// inputs keep their weight (window = valid). 0 = off.
-  double density_power = 1.0;
+  double density_power = settings_default::density_power;
   /// Half-size of the window of s(x) and of the density, in pixels (>= 1).
-  int local_radius = 1;
+  int local_radius = settings_default::local_radius;
   /// Edge weights of the links between two pixels that no input observes are
-  /// multiplied by this, in (0, 1] (1 = off, the default): a pixel next to an
+  /// multiplied by this, in (0, 1] (1 = off): a pixel next to an
   /// observed surface and inside a hole (a dropout, a silhouette's rim)
   /// follows that surface rather than the empty region around it. Fixed
-  /// before the solve. 0.5 fills Castle's holes better (see docs/accuracy.md) but also
-  /// acts like a larger lambda for sparse inputs, whose pixels are nearly all
-  /// holes.
-  double hole_link_weight = 1.0;
+  /// before the solve. Lower values act like a larger lambda for sparse
+  /// inputs, whose pixels are nearly all holes (docs/accuracy.md).
+  double hole_link_weight = settings_default::hole_link_weight;
 
   /// Local refinement of a warm start. The pixels that the warm start does
   /// not predict (NaN or zero normals: uncovered by a warp, or at an edge of
@@ -108,60 +127,68 @@ struct SolverSettings {
   /// half of them); the whole image follows without a time budget (with one,
   /// the warm frame ends with the refinement). Costs in proportion to those
   /// pixels, not the image. 0 = off.
-  int warm_refine_iterations = 100;
-  int warm_refine_radius = 1;
+  int warm_refine_iterations = settings_default::warm_refine_iterations;
+  int warm_refine_radius = settings_default::warm_refine_radius;
 
   // Iterations and stopping.
-  int inner_iterations = 50;      ///< Chambolle-Pock iterations per outer step
-  int max_outer_iterations = 40;  ///< majorize-minimize steps (cap)
+  int inner_iterations =
+      settings_default::inner_iterations;  ///< Chambolle-Pock iterations per
+                                           ///< outer step
+  int max_outer_iterations =
+      settings_default::max_outer_iterations;  ///< majorize-minimize steps
+                                               ///< (cap)
   int max_total_inner_iterations =
-      1000;  ///< cap over all outer steps and levels
+      settings_default::max_total_inner_iterations;  ///< cap over all outer
+                                                     ///< steps and levels
   double relative_tolerance =
-      1e-4;                     ///< stop when (E_prev - E) / E_prev falls below
-  double time_budget_ms = 0.0;  ///< wall-clock budget; 0 = none (anytime)
+      settings_default::relative_tolerance;  ///< stop when (E_prev - E) /
+                                             ///< E_prev falls below
+  double time_budget_ms =
+      settings_default::time_budget_ms;  ///< wall-clock budget; 0 = none
+                                         ///< (anytime)
   /// The budget of a stream's cold start: a solve asked to warm-start whose
   /// state cannot be used (empty, or of another size), while time_budget_ms
   /// is set. 0 = none (the iteration caps and the tolerance end it), > 0 =
   /// this many ms. Warm frames carry a cold start's map on and refine only
   /// where the view changed, so a stream's quality is set by how well its
-  /// first frame was solved: cut to a live frame's budget it leaves a map
-  /// many dB worse for many frames (bench_streaming --cold-start-budget-ms).
+  /// first frame was solved (bench_streaming --cold-start-budget-ms).
   /// Solves not asked to warm-start keep time_budget_ms.
-  double cold_start_budget_ms = 0.0;
+  double cold_start_budget_ms = settings_default::cold_start_budget_ms;
 
   /// Coarse-to-fine levels on a cold start: 1 = off, 0 = automatic (used when
   /// some pixels have no valid input), n > 1 = exactly n levels (fewer if the
   /// image gets too small).
-  int pyramid_levels = 0;
+  int pyramid_levels = settings_default::pyramid_levels;
 
   // Execution.
-  int num_threads = 0;  ///< 0 = all hardware threads
+  int num_threads =
+      settings_default::num_threads;  ///< 0 = all hardware threads
   /// The local refinement of a warm start measures its steps and runs on one
   /// thread while that is faster than num_threads (a machine whose other
   /// work holds a thread back at its frequent barriers). The results are the
   /// same bits either way; false: always num_threads.
-  bool adaptive_refine_threads = true;
-  SolverBackend backend = SolverBackend::kFast;
+  bool adaptive_refine_threads = settings_default::adaptive_refine_threads;
+  SolverBackend backend = settings_default::backend;
   /// Automatic steps: diagonal preconditioning (tau = 1 / (4 + L), sigma =
   /// 1/2 for the differences and 1 for the data terms) when true, else the
   /// scalar steps tau = sigma = 0.99 / sqrt(8 + L).
-  bool preconditioning = true;
+  bool preconditioning = settings_default::preconditioning;
   /// Explicit step sizes (override the automatic ones); 0 = automatic. When
   /// set, tau * sigma * (8 + L) must be below 1.
-  double tau = 0.0;
-  double sigma = 0.0;
+  double tau = settings_default::tau;
+  double sigma = settings_default::sigma;
   /// Balance of the automatic steps between the normals and the duals:
   /// tau *= step_balance and every sigma /= step_balance; tau * sigma, and
   /// with it the convergence guarantee, are unchanged. Below 1 the duals
   /// take the larger steps. 1 = the steps above; in [1e-3, 1e3]; not applied
   /// to explicit tau and sigma, nor to the warm start's local refinement and
   /// the pyramid's coarser levels, which keep 1 (their normals start far
-  /// from their solution: filled in, or cold). 0.25 reaches 1e-3 of the
-  /// converged energy about 2.5x sooner than 1, and 1e-4 where 1 does not
-  /// within 4000 iterations (bench_time_to_solution; docs/performance.md).
-  double step_balance = 0.25;
+  /// from their solution: filled in, or cold). Why below 1:
+  /// docs/performance.md (bench_time_to_solution).
+  double step_balance = settings_default::step_balance;
 
-  /// Throws ParameterError naming the first setting that is out of range.
+  /// Throws ParameterError naming the first setting that is out of the
+  /// table's range (settings_table.def) or a bad step pair.
   void validate() const;
 };
 

@@ -3,6 +3,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <sstream>
 
@@ -11,31 +12,24 @@
 namespace normal_fusion {
 namespace {
 
-void requireFinite(const char* name, double value) {
+/// Throws unless `value` is inside the range of the table's line.
+void requireInRange(const char* field, double value, double lo, double hi,
+                    bool lo_exclusive) {
+  std::ostringstream msg;
+  msg << "setting " << field << " = " << value << ": ";
   if (!std::isfinite(value)) {
-    std::ostringstream msg;
-    msg << "setting " << name << " = " << value << ": expected a finite number";
+    msg << "expected a finite number";
     throw ParameterError(msg.str());
   }
-}
-
-void requireAtLeast(const char* name, double value, double lo) {
-  requireFinite(name, value);
-  if (value < lo) {
-    std::ostringstream msg;
-    msg << "setting " << name << " = " << value << ": expected >= " << lo;
-    throw ParameterError(msg.str());
+  const bool below = lo_exclusive ? !(value > lo) : value < lo;
+  if (!below && value <= hi) return;
+  if (hi == INT_MAX) {
+    msg << "expected >= " << lo;
+  } else {
+    msg << "expected in " << (lo_exclusive ? "(" : "[") << lo << ", " << hi
+        << "]";
   }
-}
-
-void requireRange(const char* name, double value, double lo, double hi) {
-  requireFinite(name, value);
-  if (value < lo || value > hi) {
-    std::ostringstream msg;
-    msg << "setting " << name << " = " << value << ": expected in [" << lo
-        << ", " << hi << "]";
-    throw ParameterError(msg.str());
-  }
+  throw ParameterError(msg.str());
 }
 
 }  // namespace
@@ -45,37 +39,13 @@ int resolveThreadCount(int num_threads) {
 }
 
 void SolverSettings::validate() const {
-  requireAtLeast("lambda", lambda, 0.0);
-  requireAtLeast("huber_eps", huber_eps, 0.0);
-  // The guide's pre-smoothing costs 6 sigma + 1 taps per pixel: beyond 10 px
-  // it would take seconds per frame and blur every edge away.
-  requireRange("edges.smoothing_sigma", edges.smoothing_sigma, 0.0, 10.0);
-  requireAtLeast("edges.alpha", edges.alpha, 0.0);
-  requireAtLeast("edges.beta", edges.beta, 0.0);
-  requireRange("edges.w_min", edges.w_min, 0.0, 1.0);
-  requireRange("data_eps", data_eps, 0.0, 2.0);
-  requireRange("data_eps_local", data_eps_local, 0.0, 100.0);
-  requireRange("density_power", density_power, 0.0, 4.0);
-  requireRange("local_radius", local_radius, 1, 8);
-  requireRange("hole_link_weight", hole_link_weight, 0.0, 1.0);
-  if (hole_link_weight <= 0.0) {
-    throw ParameterError(
-        "setting hole_link_weight = 0: expected in (0, 1] (0 would cut holes "
-        "off from their surroundings)");
-  }
-  requireRange("warm_refine_iterations", warm_refine_iterations, 0, 100000);
-  requireRange("warm_refine_radius", warm_refine_radius, 0, 16);
-  requireAtLeast("inner_iterations", inner_iterations, 1);
-  requireAtLeast("max_outer_iterations", max_outer_iterations, 1);
-  requireAtLeast("max_total_inner_iterations", max_total_inner_iterations, 1);
-  requireAtLeast("relative_tolerance", relative_tolerance, 0.0);
-  requireAtLeast("time_budget_ms", time_budget_ms, 0.0);
-  requireAtLeast("cold_start_budget_ms", cold_start_budget_ms, 0.0);
-  requireRange("pyramid_levels", pyramid_levels, 0, 12);
-  requireRange("num_threads", num_threads, 0, 1024);
-  requireAtLeast("tau", tau, 0.0);
-  requireAtLeast("sigma", sigma, 0.0);
-  requireRange("step_balance", step_balance, 1e-3, 1e3);
+#define NF_DOUBLE(name, field, def, lo, hi, when, meaning, old) \
+  requireInRange(#field, field, lo, hi, false);
+#define NF_DOUBLE_ABOVE(name, field, def, lo, hi, when, meaning, old) \
+  requireInRange(#field, field, lo, hi, true);
+#define NF_INT(name, field, def, lo, hi, when, meaning, old) \
+  requireInRange(#field, field, lo, hi, false);
+#include "normal_fusion/detail/settings_table.def"
   if ((tau > 0.0) != (sigma > 0.0)) {
     throw ParameterError(
         "settings tau and sigma: set both (> 0) or neither (0 = automatic)");

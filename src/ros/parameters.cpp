@@ -32,77 +32,96 @@ std::string indexed(const char* stem, int i) {
   return std::string(stem) + "_" + std::to_string(i);
 }
 
-/// Visits every parameter of `s`: the single list of names, fields and ranges
-/// that both directions (map -> settings, settings -> map) walk.
+/// Visits every parameter of `s`: the settings tables' lines, walked by both
+/// directions (map -> settings, settings -> map) and the range collector.
 template <typename Visitor>
 void visitParameters(NodeSettings& s, Visitor& v) {
   SolverSettings& solver = s.solver;
-  // Model.
-  v.positive("lambda", solver.lambda, 1e6);  // 0 would ignore every input
-  v.real("huber_eps", solver.huber_eps, 0.0, 10.0);
-  v.choice("penalty", solver.penalty, parseDataPenalty);
-  v.choice("visibility", solver.visibility, parseVisibilityMode);
-  v.real("data_eps", solver.data_eps, 0.0, 2.0);
-  v.real("data_eps_local", solver.data_eps_local, 0.0, 100.0);
-  v.real("density_power", solver.density_power, 0.0, 4.0);
-  v.integer("local_radius", solver.local_radius, 1, 8);
-  v.real("hole_link_weight", solver.hole_link_weight, 1e-6, 1.0);
-  // Edge weights.
-  v.flag("edge_enabled", solver.edges.enabled);
-  v.real("edge_smoothing_sigma", solver.edges.smoothing_sigma, 0.0, 10.0);
-  v.real("edge_alpha", solver.edges.alpha, 0.0, 1e4);
-  v.real("edge_beta", solver.edges.beta, 0.0, 10.0);
-  v.real("edge_w_min", solver.edges.w_min, 0.0, 1.0);
-  v.choice("edge_color_mode", solver.edges.color_mode, parseEdgeColorMode);
-  v.choice("edge_function", solver.edges.function, parseEdgeWeightFunction);
-  v.choice("edge_gradient", solver.edges.gradient, parseEdgeGradient);
-  // Iterations and stopping.
-  v.integer("inner_iterations", solver.inner_iterations, 1, kIntMax);
-  v.integer("max_outer_iterations", solver.max_outer_iterations, 1, kIntMax);
-  v.integer("max_total_inner_iterations", solver.max_total_inner_iterations, 1,
-            kIntMax);
-  v.real("relative_tolerance", solver.relative_tolerance, 0.0, 1.0);
-  v.real("time_budget_ms", solver.time_budget_ms, 0.0, 1e6);
-  v.real("cold_start_budget_ms", solver.cold_start_budget_ms, 0.0, 1e6);
-  v.integer("warm_refine_iterations", solver.warm_refine_iterations, 0, 100000);
-  v.integer("warm_refine_radius", solver.warm_refine_radius, 0, 16);
-  v.integer("pyramid_levels", solver.pyramid_levels, 0, 12);
-  // Execution.
-  v.integer("num_threads", solver.num_threads, 0, 1024);
-  v.flag("adaptive_refine_threads", solver.adaptive_refine_threads);
-  v.choice("backend", solver.backend, parseSolverBackend);
-  v.flag("preconditioning", solver.preconditioning);
-  v.real("tau", solver.tau, 0.0, 1e3);
-  v.real("sigma", solver.sigma, 0.0, 1e3);
-  v.real("step_balance", solver.step_balance, 1e-3, 1e3);
+#define NF_DOUBLE(name, field, def, lo, hi, when, meaning, old) \
+  v.real(#name, solver.field, lo, hi);
+#define NF_DOUBLE_ABOVE(name, field, def, lo, hi, when, meaning, old) \
+  v.above(#name, solver.field, lo, hi);
+#define NF_INT(name, field, def, lo, hi, when, meaning, old) \
+  v.integer(#name, solver.field, lo, hi);
+#define NF_BOOL(name, field, def, when, meaning, old) \
+  v.flag(#name, solver.field);
+#define NF_ENUM(name, field, def, Type, values, when, meaning, old) \
+  v.choice(#name, solver.field, parse##Type);
+#include "normal_fusion/detail/settings_table.def"
 
-  // The node: inputs.
-  v.integer("num_inputs", s.num_inputs, 1, kMaxInputs);
-  for (int i = 0; i < kMaxInputs; ++i) {
-    InputSettings& input = s.inputs[i];
-    v.real(indexed("weight", i).c_str(), input.weight, 0.0, 1e6);
-    v.orientation(indexed("orientation", i).c_str(), input);
-    v.flag(indexed("use_confidence", i).c_str(), input.use_confidence);
-    v.flag(indexed("optional", i).c_str(), input.optional);
+#define NF_DOUBLE(name, field, def, lo, hi, when, meaning, old) \
+  v.real(#name, s.field, lo, hi);
+#define NF_INT(name, field, def, lo, hi, when, meaning, old) \
+  v.integer(#name, s.field, lo, hi);
+#define NF_BOOL(name, field, def, when, meaning, old) v.flag(#name, s.field);
+#define NF_ENUM(name, field, def, Type, values, when, meaning, old) \
+  v.choice(#name, s.field, parse##Type);
+#define NF_STRING(name, field, def, when, meaning, old) v.text(#name, s.field);
+#define NF_INPUT_DOUBLE(name, field, def, lo, hi, when, meaning, old) \
+  for (int i = 0; i < kMaxInputs; ++i) {                              \
+    v.real(indexed(#name, i).c_str(), s.inputs[i].field, lo, hi);     \
   }
-  v.choice("resampling", s.resampling, parseResampling);
-  v.real("unit_tolerance", s.unit_tolerance, 0.0, 1.0);
-  // Synchronization.
-  v.flag("approximate_sync", s.approximate_sync);
-  v.integer("queue_size", s.queue_size, 1, 1000);
-  v.real("max_interval", s.max_interval, 0.0, 3600.0);
-  v.real("missing_input_timeout", s.missing_input_timeout, 0.0, 1e6);
-  v.integer("max_pixels", s.max_pixels, 4, kIntMax);
-  v.real("expected_rate_min", s.expected_rate_min, 0.0, 1e4);
-  v.real("expected_rate_max", s.expected_rate_max, 0.0, 1e4);
-  // Warm start.
-  v.flag("warm_start", s.warm_start);
-  v.real("warm_start_max_gap", s.warm_start_max_gap, 0.0, 1e6);
-  v.text("fixed_frame", s.fixed_frame);
-  // Temporal averaging of the inputs.
-  v.integer("temporal_frames", s.temporal.frames, 0, 100000);
-  v.real("temporal_gate_deg", s.temporal.gate_degrees, 0.1, 180.0);
-  v.real("tf_timeout", s.tf_timeout, 0.0, 10.0);
+#define NF_INPUT_BOOL(name, field, def, when, meaning, old) \
+  for (int i = 0; i < kMaxInputs; ++i) {                    \
+    v.flag(indexed(#name, i).c_str(), s.inputs[i].field);   \
+  }
+#define NF_INPUT_ORIENTATION(name, field, def, when, meaning, old) \
+  for (int i = 0; i < kMaxInputs; ++i) {                           \
+    v.orientation(indexed(#name, i).c_str(), s.inputs[i]);         \
+  }
+#include "normal_fusion/ros/detail/node_settings_table.def"
+}
+
+std::vector<SettingDescriptor> makeNodeDescriptors() {
+  std::vector<SettingDescriptor> table;
+  std::string group;
+  const auto add = [&](SettingDescriptor d, bool per_input) {
+    d.per_input = per_input;
+    table.push_back(std::move(d));
+  };
+#define NF_GROUP(name) group = #name;
+#define NF_DOUBLE(name, field, def, lo, hi, when, meaning, old)         \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kDouble, \
+                            double(def), lo, hi, false, "",             \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      false);
+#define NF_INPUT_DOUBLE(name, field, def, lo, hi, when, meaning, old)   \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kDouble, \
+                            double(def), lo, hi, false, "",             \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      true);
+#define NF_INT(name, field, def, lo, hi, when, meaning, old)                   \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kInt, int(def), \
+                            lo, hi, false, "", NF_SETTING_IS_DYNAMIC(when),    \
+                            meaning, old),                                     \
+      false);
+#define NF_BOOL(name, field, def, when, meaning, old)                   \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kBool,   \
+                            bool(def), 0, 0, false, "",                 \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      false);
+#define NF_INPUT_BOOL(name, field, def, when, meaning, old)             \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kBool,   \
+                            bool(def), 0, 0, false, "",                 \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      true);
+#define NF_ENUM(name, field, def, Type, values, when, meaning, old)     \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kEnum,   \
+                            toString(Type::def), 0, 0, false, values,   \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      false);
+#define NF_STRING(name, field, def, when, meaning, old)                 \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kString, \
+                            std::string(def), 0, 0, false, "",          \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      false);
+#define NF_INPUT_ORIENTATION(name, field, def, when, meaning, old)      \
+  add(makeSettingDescriptor(#name, #field, group, SettingType::kString, \
+                            std::string(def), 0, 0, false, "",          \
+                            NF_SETTING_IS_DYNAMIC(when), meaning, old), \
+      true);
+#include "normal_fusion/ros/detail/node_settings_table.def"
+  return table;
 }
 
 const char* typeName(const ParameterValue& value) {
@@ -161,8 +180,8 @@ class Reader {
     it->second = value;
   }
 
-  /// A finite number in (0, hi]: anything else keeps the value in use.
-  void positive(const char* name, double& field, double hi) {
+  /// A finite number in (lo, hi]: anything else keeps the value in use.
+  void above(const char* name, double& field, double lo, double hi) {
     seen_.insert(name);
     auto it = params_.find(name);
     if (it == params_.end()) {
@@ -175,13 +194,14 @@ class Reader {
     } else if (const int* n = std::get_if<int>(&it->second)) {
       value = *n;
     } else {
-      return replace(
-          it, field,
-          "expected a number > 0, got a " + std::string(typeName(it->second)));
-    }
-    if (!(value > 0.0) || !(value <= hi)) {
       return replace(it, field,
-                     "expected a number in (0, " + numberText(hi) + "]");
+                     "expected a number > " + numberText(lo) + ", got a " +
+                         std::string(typeName(it->second)));
+    }
+    if (!(value > lo) || !(value <= hi)) {
+      return replace(it, field,
+                     "expected a number in (" + numberText(lo) + ", " +
+                         numberText(hi) + "]");
     }
     field = value;
     it->second = value;
@@ -324,7 +344,7 @@ class Writer {
   void integer(const char* name, int& field, int, int) {
     params_[name] = field;
   }
-  void positive(const char* name, double& field, double) {
+  void above(const char* name, double& field, double, double) {
     params_[name] = field;
   }
   void flag(const char* name, bool& field) { params_[name] = field; }
@@ -353,9 +373,9 @@ class RangeCollector {
     ranges_->push_back(
         {name, static_cast<double>(lo), static_cast<double>(hi)});
   }
-  void positive(const char* name, double&, double hi) {
-    // (0, hi]: the smallest positive double stands for the open bound.
-    ranges_->push_back({name, std::numeric_limits<double>::denorm_min(), hi});
+  void above(const char* name, double&, double lo, double hi) {
+    // (lo, hi]: the next double above lo stands for the open bound.
+    ranges_->push_back({name, std::nextafter(lo, kInf), hi});
   }
   void flag(const char*, bool&) {}
   void text(const char*, std::string&) {}
@@ -377,14 +397,27 @@ std::vector<ParameterRange> numericParameterRanges() {
   return ranges;
 }
 
+const std::vector<SettingDescriptor>& nodeSettingDescriptors() {
+  static const std::vector<SettingDescriptor> table = makeNodeDescriptors();
+  return table;
+}
+
 bool isDynamicParameter(const std::string& name) {
-  if (name == "num_inputs" || name == "approximate_sync" ||
-      name == "queue_size" || name == "max_pixels" ||
-      name == "expected_rate_min" || name == "expected_rate_max") {
-    return false;
+  for (const auto* table :
+       {&solverSettingDescriptors(), &nodeSettingDescriptors()}) {
+    for (const SettingDescriptor& d : *table) {
+      if (d.name == name) return d.dynamic;
+      if (d.per_input && name.rfind(d.name + "_", 0) == 0 &&
+          name.size() > d.name.size() + 1) {
+        const std::string index = name.substr(d.name.size() + 1);
+        if (index.find_first_not_of("0123456789") == std::string::npos &&
+            std::stoi(index) < kMaxInputs) {
+          return d.dynamic;
+        }
+      }
+    }
   }
-  return name.rfind("use_confidence_", 0) != 0 &&
-         name.rfind("optional_", 0) != 0;
+  return true;
 }
 
 ParameterMap parametersFromSettings(const NodeSettings& settings) {

@@ -235,7 +235,7 @@ TEST_F(FuseNormalsCliTest, PerInputOptionsReachTheSolver) {
   // Only a flipped input: without its orientation the result would face away.
   std::vector<std::string> args = baseArgs();
   args.insert(args.end(), {"--normals", path("flipped.exr"), "--orientation",
-                           "optical_flipped", "--threads", "1"});
+                           "optical_flipped", "--num-threads", "1"});
   RunResult result = runTool(args);
   ASSERT_EQ(result.exit_code, 0) << "stderr: " << result.err;
   NormalMap fused = io::readNormalMap(path("fused.exr"));
@@ -415,7 +415,7 @@ TEST_F(FuseNormalsCliTest, UsageErrorsExitWithTwo) {
       {withInput({"--visibility", "sometimes"}), "--visibility"},
       {withInput({"--orientation", "sideways"}), "--orientation"},
       {withInput({"--weight", "-2"}), "--weight"},
-      {withInput({"--tolerance"}), "needs a value"},
+      {withInput({"--relative-tolerance"}), "needs a value"},
       {withInput({"stray"}), "stray"},
       {{"--weight", "2", "--image", path("image.png")}, "--normals"},
       {{"--image", path("image.png"), "--camera-info", path("camera.yaml"),
@@ -433,6 +433,29 @@ TEST_F(FuseNormalsCliTest, UsageErrorsExitWithTwo) {
     expectOneLineError(result, c.needle);
   }
   EXPECT_FALSE(fs::exists(path("fused.exr")));
+}
+
+TEST_F(FuseNormalsCliTest, OldOptionSpellingsStillWorkAndNameTheNewOnes) {
+  std::vector<std::string> args = baseArgs();
+  args.insert(args.end(), {"--normals", path("noisy.exr"), "--eps", "0.01",
+                           "--threads", "1"});
+  const RunResult result = runTool(args);
+  ASSERT_EQ(result.exit_code, 0) << "stderr: " << result.err;
+  EXPECT_EQ(result.err,
+            "fuse_normals: warning: --eps is deprecated; use --huber-eps\n"
+            "fuse_normals: warning: --threads is deprecated; use "
+            "--num-threads\n");
+  EXPECT_TRUE(fs::exists(path("fused.exr")));
+}
+
+TEST_F(FuseNormalsCliTest, PrintsTheSettingsTableOfTheDocs) {
+  const RunResult result = runTool({"--print-settings-markdown"});
+  EXPECT_EQ(result.exit_code, 0);
+  EXPECT_EQ(result.out.rfind("| parameter | option |", 0), 0u) << result.out;
+  EXPECT_NE(result.out.find("| `huber_eps` | `--huber-eps` | 0 |"),
+            std::string::npos)
+      << result.out;
+  EXPECT_TRUE(result.err.empty());
 }
 
 TEST_F(FuseNormalsCliTest, HelpPrintsUsage) {

@@ -2,9 +2,11 @@
 // values are refused with the option's name.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <sstream>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/settings_table.h"
 #include "normal_fusion/solver_options.h"
 
 namespace normal_fusion {
@@ -13,30 +15,30 @@ namespace {
 TEST(SolverOptions, EachOptionSetsItsField) {
   SolverSettings s;
   cli::applySolverOption("--lambda", "2.5", s);
-  cli::applySolverOption("--eps", "0.01", s);
+  cli::applySolverOption("--huber-eps", "0.01", s);
   cli::applySolverOption("--penalty", "squared_l2", s);
   cli::applySolverOption("--visibility", "hard", s);
-  cli::applySolverOption("--edges", "off", s);
+  cli::applySolverOption("--edge-enabled", "off", s);
   cli::applySolverOption("--edge-gradient", "sobel", s);
-  cli::applySolverOption("--edge-color", "luminance", s);
+  cli::applySolverOption("--edge-color-mode", "luminance", s);
   cli::applySolverOption("--edge-function", "rational", s);
   cli::applySolverOption("--edge-alpha", "7", s);
   cli::applySolverOption("--edge-beta", "2", s);
-  cli::applySolverOption("--edge-wmin", "0.2", s);
-  cli::applySolverOption("--edge-sigma", "0.8", s);
+  cli::applySolverOption("--edge-w-min", "0.2", s);
+  cli::applySolverOption("--edge-smoothing-sigma", "0.8", s);
   cli::applySolverOption("--data-eps", "0.05", s);
   cli::applySolverOption("--data-eps-local", "1.5", s);
   cli::applySolverOption("--density-power", "0.5", s);
   cli::applySolverOption("--local-radius", "2", s);
   cli::applySolverOption("--hole-link-weight", "0.75", s);
   cli::applySolverOption("--inner-iterations", "30", s);
-  cli::applySolverOption("--max-outer", "9", s);
-  cli::applySolverOption("--max-iterations", "333", s);
-  cli::applySolverOption("--tolerance", "1e-5", s);
+  cli::applySolverOption("--max-outer-iterations", "9", s);
+  cli::applySolverOption("--max-total-inner-iterations", "333", s);
+  cli::applySolverOption("--relative-tolerance", "1e-5", s);
   cli::applySolverOption("--time-budget-ms", "33", s);
   cli::applySolverOption("--pyramid-levels", "3", s);
   cli::applySolverOption("--preconditioning", "off", s);
-  cli::applySolverOption("--threads", "1", s);
+  cli::applySolverOption("--num-threads", "1", s);
   cli::applySolverOption("--adaptive-refine-threads", "off", s);
   cli::applySolverOption("--cold-start-budget-ms", "250", s);
   cli::applySolverOption("--backend", "reference", s);
@@ -78,11 +80,11 @@ TEST(SolverOptions, EachOptionSetsItsField) {
   std::ostringstream help;
   cli::printSolverOptions(help, SolverSettings());
   for (const char* name :
-       {"--lambda", "--eps", "--edge-gradient", "--preconditioning",
-        "--backend", "--max-iterations", "--data-eps", "--data-eps-local",
-        "--density-power", "--local-radius", "--hole-link-weight",
-        "--adaptive-refine-threads", "--cold-start-budget-ms",
-        "--step-balance"}) {
+       {"--lambda", "--huber-eps", "--edge-gradient", "--preconditioning",
+        "--backend", "--max-total-inner-iterations", "--data-eps",
+        "--data-eps-local", "--density-power", "--local-radius",
+        "--hole-link-weight", "--adaptive-refine-threads",
+        "--cold-start-budget-ms", "--step-balance"}) {
     EXPECT_TRUE(cli::isSolverOption(name)) << name;
     EXPECT_NE(help.str().find(name), std::string::npos) << name;
   }
@@ -107,6 +109,36 @@ TEST(SolverOptions, BadValuesNameTheOption) {
   expect_refused("--preconditioning", "maybe");
   EXPECT_FALSE(cli::isSolverOption("--output"));
   EXPECT_THROW(cli::applySolverOption("--output", "x", s), ParameterError);
+}
+
+TEST(SolverOptions, EverySettingHasTheOptionOfItsName) {
+  for (const SettingDescriptor& d : solverSettingDescriptors()) {
+    std::string expected = "--" + d.name;
+    std::replace(expected.begin(), expected.end(), '_', '-');
+    EXPECT_EQ(d.cliOption(), expected);
+    EXPECT_TRUE(cli::isSolverOption(expected)) << expected;
+    EXPECT_EQ(cli::replacementOption(expected), "") << expected;
+    if (!d.old_option.empty()) {
+      EXPECT_TRUE(cli::isSolverOption(d.old_option)) << d.old_option;
+      EXPECT_EQ(cli::replacementOption(d.old_option), expected);
+    }
+  }
+}
+
+TEST(SolverOptions, AnOldSpellingStillWorksAndNamesTheNewOne) {
+  SolverSettings s;
+  std::ostringstream warnings;
+  cli::applySolverOption("--eps", "0.01", s, warnings);
+  cli::applySolverOption("--edges", "off", s, warnings);
+  EXPECT_EQ(s.huber_eps, 0.01);
+  EXPECT_FALSE(s.edges.enabled);
+  EXPECT_EQ(warnings.str(),
+            "warning: --eps is deprecated; use --huber-eps\n"
+            "warning: --edges is deprecated; use --edge-enabled\n");
+  warnings.str("");
+  cli::applySolverOption("--huber-eps", "0.02", s, warnings);
+  EXPECT_EQ(s.huber_eps, 0.02);
+  EXPECT_TRUE(warnings.str().empty());
 }
 
 }  // namespace
