@@ -11,6 +11,7 @@
 #include <optional>
 #include <string>
 
+#include "normal_fusion/detail/stream_defaults.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/temporal.h"
 #include "normal_fusion/warp.h"
@@ -22,11 +23,11 @@ struct StreamSettings {
   SolverSettings solver;
   /// Each frame warm-started from the previous frame's result when the
   /// stream continues (see StreamFuser::continuesStream).
-  bool warm_start = true;
+  bool warm_start = stream_default::warm_start;
   /// Largest stamp gap to warm-start over, seconds, on top of the time the
   /// previous frame took (frames arriving meanwhile are dropped by a live
   /// caller, so the gap to the next frame solved is at least that long).
-  double warm_start_max_gap = 0.5;
+  double warm_start_max_gap = stream_default::warm_start_max_gap;
   /// Each input averaged over the stream's frames before the solve.
   TemporalSettings temporal;
   /// What the rotation warp does with the duals; unset: reset while the

@@ -6,6 +6,7 @@
 #include <array>
 #include <vector>
 
+#include "normal_fusion/detail/stream_defaults.h"
 #include "normal_fusion/solver.h"
 
 namespace normal_fusion {
@@ -16,12 +17,12 @@ struct TemporalSettings {
   /// of the pixel's samples since it (re)started while there are fewer than
   /// `frames` of them, then an exponential average that gives a new sample
   /// the weight 1 / frames. 0 or 1 = off (each frame's own inputs).
-  int frames = 0;
+  int frames = stream_default::temporal_frames;
   /// A sample more than this many degrees from its pixel's average starts
   /// the average anew: content that moved or changed, an edge that the
   /// camera's translation (which the rotation ignores) shifted, an outlier
   /// that the average held. In (0, 180].
-  double gate_degrees = 45.0;
+  double gate_degrees = stream_default::temporal_gate_deg;
 
   bool enabled() const { return frames > 1; }
   /// Throws ParameterError naming the first setting that is out of range.
