@@ -37,9 +37,9 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 

@@ -1,4 +1,4 @@
-#include "normal_fusion/castle.h"
+#include "eval/castle.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,5 @@
 // Synthetic indoor-like scenes (a small ray caster) and noise models.
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 
 #include <algorithm>
 #include <array>

@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {

@@ -48,15 +48,15 @@
 #include <opencv2/imgproc.hpp>
 
 #include "normal_fusion/bilateral.h"
-#include "normal_fusion/castle.h"
+#include "eval/castle.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/io.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/peers.h"
+#include "eval/peers.h"
 #include "normal_fusion/settings.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/solver_options.h"
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 #include "normal_fusion/temporal.h"
 #include "normal_fusion/types.h"
 #include "normal_fusion/warp.h"
