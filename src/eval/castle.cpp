@@ -1,3 +1,5 @@
+// The Castle sequence's frames: depth, image, pose and intrinsics files, and
+// the ground truth rendered from the model (castle_model.cpp).
 #include "eval/castle.h"
 
 #include <algorithm>
@@ -11,35 +13,14 @@
 #include <string>
 #include <vector>
 
+#include "eval/castle_internal.h"
 #include "normal_fusion/errors.h"
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/io.h"
 
 namespace normal_fusion {
 namespace castle {
-namespace {
-
-namespace fs = std::filesystem;
-using Vec3 = std::array<double, 3>;
-
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-/// Largest side of a depth file we accept (guards against a corrupt header).
-constexpr std::uint32_t kMaxDepthSide = 16384;
-
-std::string numbered(const std::string& dir, const char* pattern, int number) {
-  char name[64];
-  std::snprintf(name, sizeof(name), pattern, number);
-  return (fs::path(dir) / name).string();
-}
-
-std::string imagePath(const std::string& dir, int n) {
-  return numbered(dir, "Images/Image_%04d.pgm", n);
-}
-std::string depthPath(const std::string& dir, int n) {
-  return numbered(dir, "Depth/Depth_%04d.bin", n);
-}
-std::string posePath(const std::string& dir, int n) {
-  return numbered(dir, "CameraPose/Camera_%03d.txt", n);
-}
+namespace internal {
 
 std::string readText(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -49,39 +30,6 @@ std::string readText(const std::string& path) {
   return text.str();
 }
 
-double dot(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-/// X' = R X + t of a pose.
-Vec3 transform(const synthetic::Pose& T, const Vec3& X) {
-  const auto& R = T.R_cam_world;
-  return {R[0] * X[0] + R[1] * X[1] + R[2] * X[2] + T.t_cam_world[0],
-          R[3] * X[0] + R[4] * X[1] + R[5] * X[2] + T.t_cam_world[1],
-          R[6] * X[0] + R[7] * X[1] + R[8] * X[2] + T.t_cam_world[2]};
-}
-
-/// Newell's normal of a polygon: its direction is the plane normal, its
-/// length twice the area.
-Vec3 newellNormal(const std::vector<Vec3>& polygon) {
-  Vec3 n{0.0, 0.0, 0.0};
-  for (std::size_t i = 0; i < polygon.size(); ++i) {
-    const Vec3& a = polygon[i];
-    const Vec3& b = polygon[(i + 1) % polygon.size()];
-    n[0] += (a[1] - b[1]) * (a[2] + b[2]);
-    n[1] += (a[2] - b[2]) * (a[0] + b[0]);
-    n[2] += (a[0] - b[0]) * (a[1] + b[1]);
-  }
-  return n;
-}
-
-bool isDegenerate(const std::vector<Vec3>& polygon) {
-  if (polygon.size() < 3) return true;
-  const Vec3 n = newellNormal(polygon);
-  return std::sqrt(dot(n, n)) < 1e-12;
-}
-
-/// Numbers of a text, separators being anything that cannot start a number.
 std::vector<double> numbersIn(const std::string& text) {
   std::vector<double> values;
   const char* p = text.c_str();
@@ -102,20 +50,6 @@ std::vector<double> numbersIn(const std::string& text) {
   return values;
 }
 
-/// Removes '#' comments up to the end of each line.
-std::string stripComments(const std::string& text) {
-  std::string out;
-  out.reserve(text.size());
-  bool in_comment = false;
-  for (char c : text) {
-    if (c == '#') in_comment = true;
-    if (c == '\n') in_comment = false;
-    if (!in_comment) out.push_back(c);
-  }
-  return out;
-}
-
-/// The text between `open` (searched from `from`) and the next `close`.
 bool between(const std::string& text, const std::string& open,
              const std::string& close, std::size_t from, std::string* inner,
              std::size_t* after) {
@@ -128,61 +62,34 @@ bool between(const std::string& text, const std::string& open,
   return true;
 }
 
-/// One face of a polygon list, checked and kept unless degenerate.
-void addFace(const std::vector<Vec3>& points, const std::vector<int>& indices,
-             const std::string& path, std::vector<Face>* faces) {
-  Face face;
-  for (int index : indices) {
-    if (index < 0 || index >= static_cast<int>(points.size())) {
-      throw InputError("castle: '" + path + "': vertex index " +
-                       std::to_string(index) + " outside 0.." +
-                       std::to_string(points.size()) + "-1");
-    }
-    face.vertices_obj.push_back(points[index]);
-  }
-  if (!isDegenerate(face.vertices_obj)) faces->push_back(std::move(face));
+}  // namespace internal
+
+namespace {
+
+namespace fs = std::filesystem;
+using internal::between;
+using internal::numbersIn;
+using internal::readText;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+/// Largest side of a depth file we accept (guards against a corrupt header).
+constexpr std::uint32_t kMaxDepthSide = 16384;
+
+std::string numbered(const std::string& dir, const char* pattern, int number) {
+  char name[64];
+  std::snprintf(name, sizeof(name), pattern, number);
+  return (fs::path(dir) / name).string();
 }
 
-/// Token stream of a .cao file: comments removed, name=... tokens skipped.
-class CaoTokens {
- public:
-  explicit CaoTokens(const std::string& path) : path_(path) {
-    std::istringstream in(stripComments(readText(path)));
-    std::string token;
-    while (in >> token) {
-      if (token.find('=') == std::string::npos) tokens_.push_back(token);
-    }
-  }
-  bool done() const { return next_ >= tokens_.size(); }
-  const std::string& peek() const { return tokens_[next_]; }
-  std::string take() {
-    if (done()) throw InputError("castle: '" + path_ + "': truncated");
-    return tokens_[next_++];
-  }
-  double number() {
-    const std::string token = take();
-    char* end = nullptr;
-    const double v = std::strtod(token.c_str(), &end);
-    if (end == token.c_str() || *end != '\0' || !std::isfinite(v)) {
-      throw InputError("castle: '" + path_ + "': expected a number, got '" +
-                       token + "'");
-    }
-    return v;
-  }
-  int count() {
-    const double v = number();
-    if (v < 0 || v != std::floor(v) || v > 1e7) {
-      throw InputError("castle: '" + path_ + "': expected a count, got " +
-                       std::to_string(v));
-    }
-    return static_cast<int>(v);
-  }
-
- private:
-  std::string path_;
-  std::vector<std::string> tokens_;
-  std::size_t next_ = 0;
-};
+std::string imagePath(const std::string& dir, int n) {
+  return numbered(dir, "Images/Image_%04d.pgm", n);
+}
+std::string depthPath(const std::string& dir, int n) {
+  return numbered(dir, "Depth/Depth_%04d.bin", n);
+}
+std::string posePath(const std::string& dir, int n) {
+  return numbered(dir, "CameraPose/Camera_%03d.txt", n);
+}
 
 /// Bilinear sample of plane 0 at (u, v), clamped to the image.
 float bilinear(const ColorImage& image, double u, double v) {
@@ -210,6 +117,129 @@ PlanarImage crop(const PlanarImage& image, int x0, int y0, int width,
     }
   }
   return out;
+}
+
+/// The model's normals where its depth agrees with the file's, and the box
+/// of the pixels with depth.
+struct GroundTruth {
+  NormalMap normals;
+  int with_depth = 0, agreeing = 0;
+  int x_lo = 0, x_hi = -1, y_lo = 0, y_hi = -1;
+};
+
+GroundTruth groundTruth(const ScalarMap& depth, const ScalarMap& model_depth,
+                        const NormalMap& model_normals, double tolerance_m) {
+  const int W = depth.width(), H = depth.height();
+  GroundTruth truth;
+  truth.normals = NormalMap(W, H, 3, kNaN);
+  truth.x_lo = W;
+  truth.y_lo = H;
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const float z = depth.at(0, y, x);
+      if (std::isnan(z)) continue;
+      ++truth.with_depth;
+      truth.x_lo = std::min(truth.x_lo, x);
+      truth.x_hi = std::max(truth.x_hi, x);
+      truth.y_lo = std::min(truth.y_lo, y);
+      truth.y_hi = std::max(truth.y_hi, y);
+      const float z_model = model_depth.at(0, y, x);
+      if (!(std::fabs(z_model - z) <= tolerance_m)) continue;
+      ++truth.agreeing;
+      for (int c = 0; c < 3; ++c) {
+        truth.normals.at(c, y, x) = model_normals.at(c, y, x);
+      }
+    }
+  }
+  return truth;
+}
+
+/// Where depth pixel (x, y) at depth z projects in the colour image
+/// (X_c = X_d - (kDepthFromColorXM, 0, 0), pinhole K_color).
+struct ColorProjection {
+  Mat3 K_depth_inv;
+  CameraIntrinsics K_color;
+
+  void operator()(int x, int y, double z, double* u, double* v) const {
+    const Mat3& Ki = K_depth_inv;
+    const double X = z * (Ki[0] * x + Ki[1] * y + Ki[2]) - kDepthFromColorXM;
+    const double Y = z * (Ki[3] * x + Ki[4] * y + Ki[5]);
+    *u = (K_color.K[0] * X + K_color.K[1] * Y) / z + K_color.K[2];
+    *v = K_color.K[4] * Y / z + K_color.K[5];
+  }
+};
+
+/// Colour pixels no depth point reaches (3 x 3 footprint): the background
+/// as the colour camera sees it.
+std::vector<unsigned char> reachedPixels(const ScalarMap& depth,
+                                         const ColorProjection& project,
+                                         int W_color, int H_color) {
+  std::vector<unsigned char> reached(
+      static_cast<std::size_t>(W_color) * H_color, 0);
+  for (int y = 0; y < depth.height(); ++y) {
+    for (int x = 0; x < depth.width(); ++x) {
+      const float z = depth.at(0, y, x);
+      if (std::isnan(z)) continue;
+      double u = 0.0, v = 0.0;
+      project(x, y, z, &u, &v);
+      const int cu = static_cast<int>(std::lround(u));
+      const int cv = static_cast<int>(std::lround(v));
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (cu + dx < 0 || cu + dx >= W_color || cv + dy < 0 ||
+              cv + dy >= H_color) {
+            continue;
+          }
+          reached[static_cast<std::size_t>(cv + dy) * W_color + cu + dx] = 1;
+        }
+      }
+    }
+  }
+  return reached;
+}
+
+/// The guide: the colour camera's image sampled where each depth pixel's
+/// point projects.
+ColorImage guideImage(const ScalarMap& depth, const ColorImage& image_color,
+                      const CameraIntrinsics& K_depth,
+                      const CameraIntrinsics& K_color) {
+  const int W = depth.width(), H = depth.height();
+  const ColorProjection project{K_depth.inverse(), K_color};
+  const int W_color = image_color.width(), H_color = image_color.height();
+  const std::vector<unsigned char> reached =
+      reachedPixels(depth, project, W_color, H_color);
+  ColorImage image(W, H, image_color.channels());
+  ColorImage plane(W_color, H_color, 1);
+  std::vector<float> background;
+  for (int c = 0; c < image_color.channels(); ++c) {
+    std::copy(image_color.plane(c), image_color.plane(c) + plane.pixelCount(),
+              plane.plane(0));
+    // Pixels without depth get the median background intensity (sampling
+    // them at some depth would copy objects seen beside them).
+    background.clear();
+    for (std::size_t i = 0; i < reached.size(); ++i) {
+      if (!reached[i]) background.push_back(plane.data()[i]);
+    }
+    float background_value = 0.0f;
+    if (!background.empty()) {
+      auto mid = background.begin() + background.size() / 2;
+      std::nth_element(background.begin(), mid, background.end());
+      background_value = *mid;
+    }
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const float z = depth.at(0, y, x);
+        if (std::isnan(z)) {
+          image.at(c, y, x) = background_value;
+          continue;
+        }
+        double u = 0.0, v = 0.0;
+        project(x, y, z, &u, &v);
+        image.at(c, y, x) = bilinear(plane, u, v);
+      }
+    }
+  }
+  return image;
 }
 
 }  // namespace
@@ -303,17 +333,8 @@ synthetic::Pose readPose(const std::string& path) {
     for (int c = 0; c < 3; ++c) pose.R_cam_world[3 * r + c] = m[4 * r + c];
     pose.t_cam_world[r] = m[4 * r + 3];
   }
-  // R R^T = I within the precision of the file.
-  const auto& R = pose.R_cam_world;
-  for (int a = 0; a < 3; ++a) {
-    for (int b = 0; b < 3; ++b) {
-      const double rr = R[3 * a] * R[3 * b] + R[3 * a + 1] * R[3 * b + 1] +
-                        R[3 * a + 2] * R[3 * b + 2];
-      if (std::fabs(rr - (a == b ? 1.0 : 0.0)) > 1e-4) {
-        throw InputError("castle: '" + path +
-                         "': the rotation is not orthonormal");
-      }
-    }
+  if (!isRotation(pose.R_cam_world)) {
+    throw InputError(notRotationMessage("castle: '" + path + "'"));
   }
   return pose;
 }
@@ -343,208 +364,6 @@ CameraIntrinsics readIntrinsics(const std::string& xml_path) {
                           value("u0", false), value("v0", false));
 }
 
-std::vector<Face> readVrmlFaces(const std::string& path) {
-  const std::string text = stripComments(readText(path));
-  std::vector<Face> faces;
-  std::size_t at = 0;
-  for (;;) {
-    const std::size_t set = text.find("IndexedFaceSet", at);
-    if (set == std::string::npos) break;
-    std::string points_text, index_text;
-    std::size_t after_points = 0;
-    if (!between(text, "point", "]", set, &points_text, &after_points) ||
-        !between(text, "coordIndex", "]", after_points, &index_text, &at)) {
-      throw InputError("castle: '" + path +
-                       "': an IndexedFaceSet without point or coordIndex");
-    }
-    // Points: x y z triples.
-    const std::vector<double> xyz = numbersIn(points_text);
-    if (xyz.size() % 3 != 0) {
-      throw InputError("castle: '" + path + "': expected x y z triples");
-    }
-    std::vector<Vec3> points;
-    for (std::size_t i = 0; i < xyz.size(); i += 3) {
-      points.push_back({xyz[i], xyz[i + 1], xyz[i + 2]});
-    }
-    // Polygons: indices ended by -1.
-    std::vector<int> polygon;
-    for (double v : numbersIn(index_text)) {
-      if (v < 0) {
-        addFace(points, polygon, path, &faces);
-        polygon.clear();
-      } else {
-        polygon.push_back(static_cast<int>(v));
-      }
-    }
-    if (!polygon.empty()) addFace(points, polygon, path, &faces);
-  }
-  if (faces.empty()) {
-    throw InputError("castle: '" + path + "': no faces in the VRML file");
-  }
-  return faces;
-}
-
-std::vector<Face> readCaoFaces(const std::string& path,
-                               const synthetic::Pose& T_obj_file) {
-  CaoTokens tokens(path);
-  if (tokens.done() || tokens.take() != "V1") {
-    throw InputError("castle: '" + path + "': expected a V1 .cao file");
-  }
-  std::vector<Face> faces;
-  // load("file") lines: faces of other files, relative to this one.
-  while (!tokens.done() && tokens.peek().rfind("load(", 0) == 0) {
-    const std::string token = tokens.take();
-    const std::size_t a = token.find('"'), b = token.rfind('"');
-    if (a == std::string::npos || b <= a) {
-      throw InputError("castle: '" + path + "': malformed " + token);
-    }
-    const std::string loaded =
-        (fs::path(path).parent_path() / token.substr(a + 1, b - a - 1))
-            .string();
-    for (Face& face : readCaoFaces(loaded, T_obj_file)) {
-      faces.push_back(std::move(face));
-    }
-  }
-  // Points.
-  std::vector<Vec3> points(tokens.count());
-  for (Vec3& p : points) {
-    Vec3 file{tokens.number(), tokens.number(), tokens.number()};
-    p = transform(T_obj_file, file);
-  }
-  // Segments (two indices each) and faces made of segments: not surfaces
-  // this case needs; skipped.
-  const int num_segments = tokens.count();
-  for (int i = 0; i < 2 * num_segments; ++i) tokens.number();
-  const int num_segment_faces = tokens.count();
-  for (int i = 0; i < num_segment_faces; ++i) {
-    const int n = tokens.count();
-    for (int k = 0; k < n; ++k) tokens.number();
-  }
-  // Faces made of points.
-  const int num_point_faces = tokens.count();
-  for (int i = 0; i < num_point_faces; ++i) {
-    std::vector<int> indices(tokens.count());
-    for (int& index : indices) index = tokens.count();
-    addFace(points, indices, path, &faces);
-  }
-  return faces;
-}
-
-synthetic::Pose cubeToObject() {
-  // x' = -x - 0.2, y' = z + 0.12, z' = y - 0.15 (ViSP testGenericTracker).
-  synthetic::Pose T;
-  T.R_cam_world = {{-1, 0, 0, 0, 0, 1, 0, 1, 0}};
-  T.t_cam_world = {{-0.2, 0.12, -0.15}};
-  return T;
-}
-
-std::vector<Face> loadModel(const std::string& dir) {
-  std::vector<Face> faces =
-      readVrmlFaces((fs::path(dir) / "Models/chateau.wrl").string());
-  for (Face& face : readCaoFaces((fs::path(dir) / "Models/cube.cao").string(),
-                                 cubeToObject())) {
-    faces.push_back(std::move(face));
-  }
-  return faces;
-}
-
-void renderModel(const std::vector<Face>& faces,
-                 const synthetic::Pose& T_cam_obj, const CameraIntrinsics& K,
-                 int width, int height, ScalarMap* depth_cam,
-                 NormalMap* normals_cam) {
-  if (width < 1 || height < 1) {
-    throw InputError("castle: render size expected >= 1 x 1, got " +
-                     std::to_string(width) + " x " + std::to_string(height));
-  }
-  const std::array<double, 9> K_inv = K.inverse();
-  depth_cam->resize(width, height, 1);
-  depth_cam->fill(kNaN);
-  normals_cam->resize(width, height, 3);
-  normals_cam->fill(kNaN);
-  std::vector<Vec3> polygon_cam;
-  std::vector<std::array<double, 2>> polygon_2d;
-  for (const Face& face : faces) {
-    polygon_cam.clear();
-    for (const Vec3& v : face.vertices_obj) {
-      polygon_cam.push_back(transform(T_cam_obj, v));
-    }
-    // Plane n . X = d through the polygon (camera frame).
-    Vec3 n = newellNormal(polygon_cam);
-    const double length = std::sqrt(dot(n, n));
-    if (length < 1e-12) continue;
-    for (double& c : n) c /= length;
-    Vec3 centroid{0.0, 0.0, 0.0};
-    for (const Vec3& v : polygon_cam) {
-      for (int c = 0; c < 3; ++c) centroid[c] += v[c] / polygon_cam.size();
-    }
-    const double d = dot(n, centroid);
-    // Inside test in 2D: drop the axis along which the normal is largest.
-    int drop = 0;
-    for (int c = 1; c < 3; ++c) {
-      if (std::fabs(n[c]) > std::fabs(n[drop])) drop = c;
-    }
-    const int ax = drop == 0 ? 1 : 0, ay = drop == 2 ? 1 : 2;
-    polygon_2d.clear();
-    for (const Vec3& v : polygon_cam) polygon_2d.push_back({v[ax], v[ay]});
-    // Pixel box: the projected vertices when all lie in front, else all.
-    int u_lo = 0, u_hi = width - 1, v_lo = 0, v_hi = height - 1;
-    bool in_front = true;
-    double pu_lo = 1e300, pu_hi = -1e300, pv_lo = 1e300, pv_hi = -1e300;
-    for (const Vec3& v : polygon_cam) {
-      if (v[2] <= 1e-9) {
-        in_front = false;
-        break;
-      }
-      const double pu = (K.K[0] * v[0] + K.K[1] * v[1]) / v[2] + K.K[2];
-      const double pv = K.K[4] * v[1] / v[2] + K.K[5];
-      pu_lo = std::min(pu_lo, pu);
-      pu_hi = std::max(pu_hi, pu);
-      pv_lo = std::min(pv_lo, pv);
-      pv_hi = std::max(pv_hi, pv);
-    }
-    if (in_front) {
-      u_lo = std::max(u_lo, static_cast<int>(std::floor(pu_lo)));
-      u_hi = std::min(u_hi, static_cast<int>(std::ceil(pu_hi)));
-      v_lo = std::max(v_lo, static_cast<int>(std::floor(pv_lo)));
-      v_hi = std::min(v_hi, static_cast<int>(std::ceil(pv_hi)));
-    }
-    for (int y = v_lo; y <= v_hi; ++y) {
-      for (int x = u_lo; x <= u_hi; ++x) {
-        // Ray r = K^-1 (x, y, 1); hit X = t r with n . X = d.
-        const Vec3 r{K_inv[0] * x + K_inv[1] * y + K_inv[2],
-                     K_inv[3] * x + K_inv[4] * y + K_inv[5],
-                     K_inv[6] * x + K_inv[7] * y + K_inv[8]};
-        const double n_dot_r = dot(n, r);
-        if (std::fabs(n_dot_r) < 1e-12) continue;
-        const double t = d / n_dot_r;
-        const Vec3 X{t * r[0], t * r[1], t * r[2]};
-        if (!(X[2] > 0.0)) continue;
-        const float z_old = depth_cam->at(0, y, x);
-        if (!std::isnan(z_old) && X[2] >= z_old) continue;
-        // Even-odd crossing test of the hit point against the polygon.
-        const double px = X[ax], py = X[ay];
-        bool inside = false;
-        for (std::size_t i = 0, j = polygon_2d.size() - 1;
-             i < polygon_2d.size(); j = i++) {
-          const auto& a = polygon_2d[i];
-          const auto& b = polygon_2d[j];
-          if ((a[1] > py) != (b[1] > py) &&
-              px < (b[0] - a[0]) * (py - a[1]) / (b[1] - a[1]) + a[0]) {
-            inside = !inside;
-          }
-        }
-        if (!inside) continue;
-        // Unit normal turned towards the camera: n . r <= 0.
-        const double sign = n_dot_r > 0.0 ? -1.0 : 1.0;
-        depth_cam->at(0, y, x) = static_cast<float>(X[2]);
-        for (int c = 0; c < 3; ++c) {
-          normals_cam->at(c, y, x) = static_cast<float>(sign * n[c]);
-        }
-      }
-    }
-  }
-}
-
 Frame loadFrame(const std::string& dir, int number,
                 const std::vector<Face>& faces, const LoadSettings& settings) {
   if (!(settings.agreement_tolerance_m >= 0.0)) {
@@ -561,7 +380,6 @@ Frame loadFrame(const std::string& dir, int number,
       readIntrinsics((fs::path(dir) / "Config/chateau.xml").string());
   const CameraIntrinsics K_depth =
       readIntrinsics((fs::path(dir) / "Config/chateau_depth.xml").string());
-  const int W = depth.width(), H = depth.height();
 
   // Depth camera pose: d_M_o = d_M_c c_M_o, d_M_c a translation along x.
   synthetic::Pose T_depth_obj = T_color_obj;
@@ -570,119 +388,36 @@ Frame loadFrame(const std::string& dir, int number,
   // Model depth and normals; ground truth where the model explains the depth.
   ScalarMap model_depth;
   NormalMap model_normals;
-  renderModel(faces, T_depth_obj, K_depth, W, H, &model_depth, &model_normals);
-  NormalMap normals_gt(W, H, 3, kNaN);
-  int with_depth = 0, agreeing = 0;
-  int x_lo = W, x_hi = -1, y_lo = H, y_hi = -1;
-  for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const float z = depth.at(0, y, x);
-      if (std::isnan(z)) continue;
-      ++with_depth;
-      x_lo = std::min(x_lo, x);
-      x_hi = std::max(x_hi, x);
-      y_lo = std::min(y_lo, y);
-      y_hi = std::max(y_hi, y);
-      const float z_model = model_depth.at(0, y, x);
-      if (!(std::fabs(z_model - z) <= settings.agreement_tolerance_m)) {
-        continue;
-      }
-      ++agreeing;
-      for (int c = 0; c < 3; ++c) {
-        normals_gt.at(c, y, x) = model_normals.at(c, y, x);
-      }
-    }
-  }
-
-  // Guide: the colour image sampled where each depth pixel's point projects
-  // (X_c = X_d - (kDepthFromColorXM, 0, 0), pinhole K_color).
-  const std::array<double, 9> K_depth_inv = K_depth.inverse();
-  const int W_color = image_color.width(), H_color = image_color.height();
-  const auto project = [&](int x, int y, double z, double* u, double* v) {
-    const double X =
-        z * (K_depth_inv[0] * x + K_depth_inv[1] * y + K_depth_inv[2]) -
-        kDepthFromColorXM;
-    const double Y =
-        z * (K_depth_inv[3] * x + K_depth_inv[4] * y + K_depth_inv[5]);
-    *u = (K_color.K[0] * X + K_color.K[1] * Y) / z + K_color.K[2];
-    *v = K_color.K[4] * Y / z + K_color.K[5];
-  };
-  // Colour pixels no depth point reaches (3 x 3 footprint): the background
-  // as the colour camera sees it.
-  std::vector<unsigned char> reached(image_color.pixelCount(), 0);
-  for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const float z = depth.at(0, y, x);
-      if (std::isnan(z)) continue;
-      double u = 0.0, v = 0.0;
-      project(x, y, z, &u, &v);
-      const int cu = static_cast<int>(std::lround(u));
-      const int cv = static_cast<int>(std::lround(v));
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          if (cu + dx < 0 || cu + dx >= W_color || cv + dy < 0 ||
-              cv + dy >= H_color) {
-            continue;
-          }
-          reached[static_cast<std::size_t>(cv + dy) * W_color + cu + dx] = 1;
-        }
-      }
-    }
-  }
-  ColorImage image(W, H, image_color.channels());
-  ColorImage plane(W_color, H_color, 1);
-  std::vector<float> background;
-  for (int c = 0; c < image_color.channels(); ++c) {
-    std::copy(image_color.plane(c), image_color.plane(c) + plane.pixelCount(),
-              plane.plane(0));
-    // Pixels without depth get the median background intensity (sampling
-    // them at some depth would copy objects seen beside them).
-    background.clear();
-    for (std::size_t i = 0; i < reached.size(); ++i) {
-      if (!reached[i]) background.push_back(plane.data()[i]);
-    }
-    float background_value = 0.0f;
-    if (!background.empty()) {
-      auto mid = background.begin() + background.size() / 2;
-      std::nth_element(background.begin(), mid, background.end());
-      background_value = *mid;
-    }
-    for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        const float z = depth.at(0, y, x);
-        if (std::isnan(z)) {
-          image.at(c, y, x) = background_value;
-          continue;
-        }
-        double u = 0.0, v = 0.0;
-        project(x, y, z, &u, &v);
-        image.at(c, y, x) = bilinear(plane, u, v);
-      }
-    }
-  }
+  renderModel(faces, T_depth_obj, K_depth, depth.width(), depth.height(),
+              &model_depth, &model_normals);
+  const GroundTruth truth = groundTruth(depth, model_depth, model_normals,
+                                        settings.agreement_tolerance_m);
+  const ColorImage image = guideImage(depth, image_color, K_depth, K_color);
 
   Frame frame;
   frame.number = number;
   frame.T_depth_obj = T_depth_obj;
-  frame.agreement =
-      with_depth > 0 ? static_cast<double>(agreeing) / with_depth : 0.0;
+  frame.agreement = truth.with_depth > 0
+                        ? static_cast<double>(truth.agreeing) / truth.with_depth
+                        : 0.0;
   frame.K = K_depth;
-  if (settings.crop_margin < 0 || with_depth == 0) {
+  if (settings.crop_margin < 0 || truth.with_depth == 0) {
     frame.image = image;
     frame.depth = depth;
-    frame.normals_gt = normals_gt;
+    frame.normals_gt = truth.normals;
     return frame;
   }
   // Crop to the pixels with depth, grown by the margin; K follows.
+  const int W = depth.width(), H = depth.height();
   const int m = settings.crop_margin;
-  frame.crop_x = std::max(0, x_lo - m);
-  frame.crop_y = std::max(0, y_lo - m);
-  const int crop_w = std::min(W - 1, x_hi + m) - frame.crop_x + 1;
-  const int crop_h = std::min(H - 1, y_hi + m) - frame.crop_y + 1;
+  frame.crop_x = std::max(0, truth.x_lo - m);
+  frame.crop_y = std::max(0, truth.y_lo - m);
+  const int crop_w = std::min(W - 1, truth.x_hi + m) - frame.crop_x + 1;
+  const int crop_h = std::min(H - 1, truth.y_hi + m) - frame.crop_y + 1;
   frame.image = crop(image, frame.crop_x, frame.crop_y, crop_w, crop_h);
   frame.depth = crop(depth, frame.crop_x, frame.crop_y, crop_w, crop_h);
   frame.normals_gt =
-      crop(normals_gt, frame.crop_x, frame.crop_y, crop_w, crop_h);
+      crop(truth.normals, frame.crop_x, frame.crop_y, crop_w, crop_h);
   frame.K.K[2] -= frame.crop_x;
   frame.K.K[5] -= frame.crop_y;
   return frame;
