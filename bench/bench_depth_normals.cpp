@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/depth.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 namespace nd = normal_fusion::depth;

@@ -6,8 +6,8 @@
 
 #include <cstdio>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 

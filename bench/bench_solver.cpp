@@ -8,9 +8,9 @@
 
 #include <cmath>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 

@@ -32,10 +32,11 @@
 
 #include <sys/resource.h>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/stream_fuser.h"
-#include "normal_fusion/synthetic.h"
+#include "normal_fusion/temporal.h"
 #include "normal_fusion/warp.h"
 
 namespace nf = normal_fusion;

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 

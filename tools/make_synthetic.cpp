@@ -12,9 +12,9 @@
 #include <iostream>
 #include <string>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/io.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 

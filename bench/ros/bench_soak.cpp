@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "../../test/ros/ros_test_util.h"
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 
 namespace nf = normal_fusion;
 

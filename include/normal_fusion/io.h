@@ -2,6 +2,9 @@
 // camera_info YAML.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <string>
 
 #include "normal_fusion/types.h"
@@ -38,8 +41,20 @@ ScalarMap readDepthMap(const std::string& path);
 /// kept). Throws InputError.
 void writeDepthMap(const std::string& path, const ScalarMap& depth_m);
 
-/// Colour coding of a normal map: 3 planes R, G, B in [0, 1], black where
-/// missing.
+/// The colour code of one component of a unit normal: c = (n + 1) / 2,
+/// clamped to [0, 1]; x -> R, y -> G, z -> B, black where the normal is
+/// missing. Inline, without OpenCV, so that every picture of normals (files,
+/// the nodes' visualisation) codes them alike.
+inline float colorCodeComponent(float n) {
+  return std::clamp(0.5f * (n + 1.0f), 0.0f, 1.0f);
+}
+/// The same code in 8 bits: round(255 c).
+inline std::uint8_t colorCodeByte(float n) {
+  return static_cast<std::uint8_t>(std::lround(colorCodeComponent(n) * 255.0f));
+}
+
+/// Colour coding of a normal map (colorCodeComponent): 3 planes R, G, B in
+/// [0, 1], black where missing.
 ColorImage colorCode(const NormalMap& normals);
 /// Writes the colour-coded picture (8-bit PNG).
 void writeNormalPicture(const std::string& path, const NormalMap& normals);

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "normal_fusion/geometry.h"
+
 namespace normal_fusion {
 
 /// Allocator that aligns every buffer to 64 bytes (one cache line, one AVX-512
@@ -107,7 +109,7 @@ inline bool isValidNormal(float x, float y, float z) {
 /// Pinhole intrinsics K (row-major 3x3), pixel centres at integer (u, v), as in
 /// sensor_msgs/CameraInfo. The ray of pixel (u, v) is r = K^-1 (u, v, 1)^T.
 struct CameraIntrinsics {
-  std::array<double, 9> K{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+  Mat3 K = kIdentity3;
 
   CameraIntrinsics() = default;
   CameraIntrinsics(double fx, double fy, double cx, double cy)
@@ -126,7 +128,7 @@ struct CameraIntrinsics {
   /// single precision. Throws InputError saying which bound failed.
   void validateForImage(int width, int height) const;
   /// K^-1 (row-major). Calls validate().
-  std::array<double, 9> inverse() const;
+  Mat3 inverse() const;
   /// Intrinsics of the same camera at an image scaled by (sx, sy), with the
   /// pixel-centre convention kept: u' = sx (u + 0.5) - 0.5.
   CameraIntrinsics scaled(double sx, double sy) const;

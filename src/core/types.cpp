@@ -58,9 +58,7 @@ void CameraIntrinsics::validate() const {
       throw InputError("camera intrinsics: K has a non-finite entry");
     }
   }
-  const double det = K[0] * (K[4] * K[8] - K[5] * K[7]) -
-                     K[1] * (K[3] * K[8] - K[5] * K[6]) +
-                     K[2] * (K[3] * K[7] - K[4] * K[6]);
+  const double det = determinant(K);
   const double scale = std::max({std::abs(K[0]), std::abs(K[4]), 1e-300});
   if (!(std::abs(det) > 1e-12 * scale * scale)) {
     std::ostringstream msg;
@@ -73,16 +71,15 @@ void CameraIntrinsics::validate() const {
 
 void CameraIntrinsics::validateForImage(int width, int height) const {
   validate();
-  const std::array<double, 9> Kinv = inverse();
+  const Mat3 Kinv = inverse();
   // Beyond this the rays of the edge pixels overflow what the solver's float
   // arithmetic can normalize.
   constexpr double kMaxSlope = 1e4;
   const double us[2] = {-0.5, width - 0.5}, vs[2] = {-0.5, height - 0.5};
   for (double u : us) {
     for (double v : vs) {
-      const double x = Kinv[0] * u + Kinv[1] * v + Kinv[2];
-      const double y = Kinv[3] * u + Kinv[4] * v + Kinv[5];
-      const double z = Kinv[6] * u + Kinv[7] * v + Kinv[8];
+      const Vec3 ray = multiply(Kinv, Vec3{{u, v, 1.0}});
+      const double x = ray[0], y = ray[1], z = ray[2];
       const double sx = x / z, sy = y / z;
       if (!(z > 0.0) || !std::isfinite(sx) || !std::isfinite(sy) ||
           std::abs(sx) > kMaxSlope || std::abs(sy) > kMaxSlope) {
@@ -99,22 +96,9 @@ void CameraIntrinsics::validateForImage(int width, int height) const {
   }
 }
 
-std::array<double, 9> CameraIntrinsics::inverse() const {
+Mat3 CameraIntrinsics::inverse() const {
   validate();
-  const auto& m = K;
-  const double det = m[0] * (m[4] * m[8] - m[5] * m[7]) -
-                     m[1] * (m[3] * m[8] - m[5] * m[6]) +
-                     m[2] * (m[3] * m[7] - m[4] * m[6]);
-  const double inv_det = 1.0 / det;
-  return {{(m[4] * m[8] - m[5] * m[7]) * inv_det,
-           (m[2] * m[7] - m[1] * m[8]) * inv_det,
-           (m[1] * m[5] - m[2] * m[4]) * inv_det,
-           (m[5] * m[6] - m[3] * m[8]) * inv_det,
-           (m[0] * m[8] - m[2] * m[6]) * inv_det,
-           (m[2] * m[3] - m[0] * m[5]) * inv_det,
-           (m[3] * m[7] - m[4] * m[6]) * inv_det,
-           (m[1] * m[6] - m[0] * m[7]) * inv_det,
-           (m[0] * m[4] - m[1] * m[3]) * inv_det}};
+  return normal_fusion::inverse(K, determinant(K));
 }
 
 CameraIntrinsics CameraIntrinsics::scaled(double sx, double sy) const {

@@ -389,10 +389,7 @@ ColorImage colorCode(const NormalMap& normals) {
     const float nz = normals.plane(2)[i];
     if (!isValidNormal(nx, ny, nz)) continue;  // black = missing
     const float n[3] = {nx, ny, nz};
-    // c = (n + 1) / 2 per component: x -> R, y -> G, z -> B.
-    for (int c = 0; c < 3; ++c) {
-      picture.plane(c)[i] = std::clamp(0.5f * (n[c] + 1.0f), 0.0f, 1.0f);
-    }
+    for (int c = 0; c < 3; ++c) picture.plane(c)[i] = colorCodeComponent(n[c]);
   }
   return picture;
 }

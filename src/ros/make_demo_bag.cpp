@@ -37,18 +37,17 @@
 #include <string>
 #include <vector>
 
+#include "eval/castle.h"
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/registration.h"
 #include "normal_fusion/ros/conversions.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 
 namespace {
 
-const char* const kCastelDir =
-    "/usr/share/visp-images-data/ViSP-images/mbt-depth/castel";
-constexpr double kDepthScaleM = 0.000124986647;  // SR300 units of this data
 constexpr double kFps = 30.0;
 constexpr double kFirstStamp = 1000.0;
 constexpr int kCoarseFactor = 4;
@@ -59,66 +58,6 @@ const char* const kUsage =
     "                     [--frames N] [--ground-truth GT.bag]\n"
     "Writes /image, /camera_info, /normals_0 (fine, noisy, full size) and\n"
     "/normals_1 (coarse, smooth, 1/4 size) for the normal_fusion demo.\n";
-
-std::string readText(const std::string& path) {
-  std::ifstream file(path);
-  if (!file) throw nf::InputError(path + ": cannot read");
-  std::stringstream buffer;
-  buffer << file.rdbuf();
-  return buffer.str();
-}
-
-/// px, py, u0, v0 of the <camera> block of a ViSP XML file.
-nf::CameraIntrinsics readVispCamera(const std::string& path) {
-  const std::string text = readText(path);
-  const std::size_t camera = text.find("<camera>");
-  if (camera == std::string::npos) {
-    throw nf::InputError(path + ": expected a <camera> block");
-  }
-  auto value = [&](const std::string& tag) {
-    const std::size_t open = text.find("<" + tag + ">", camera);
-    if (open == std::string::npos) {
-      throw nf::InputError(path + ": expected <" + tag + "> in <camera>");
-    }
-    return std::stod(text.substr(open + tag.size() + 2));
-  };
-  return nf::CameraIntrinsics(value("px"), value("py"), value("u0"),
-                              value("v0"));
-}
-
-/// The 4x4 depth_M_color (row-major): X_depth = depth_M_color X_color.
-std::array<double, 16> readMatrix4(const std::string& path) {
-  std::istringstream in(readText(path));
-  std::array<double, 16> m{};
-  for (double& v : m) {
-    if (!(in >> v)) throw nf::InputError(path + ": expected 16 numbers");
-  }
-  return m;
-}
-
-/// A ViSP depth file: uint32 LE height, width, then uint16 LE depth units.
-nf::ScalarMap readVispDepth(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  std::uint32_t size[2];
-  if (!file.read(reinterpret_cast<char*>(size), sizeof(size))) {
-    throw nf::InputError(path + ": cannot read the header");
-  }
-  const int H = static_cast<int>(size[0]), W = static_cast<int>(size[1]);
-  if (H <= 0 || W <= 0 || H > 10000 || W > 10000) {
-    throw nf::InputError(path + ": implausible size in the header");
-  }
-  std::vector<std::uint16_t> raw(static_cast<std::size_t>(W) * H);
-  if (!file.read(reinterpret_cast<char*>(raw.data()), raw.size() * 2)) {
-    throw nf::InputError(path + ": shorter than its header says");
-  }
-  nf::ScalarMap depth(W, H, 1);
-  for (std::size_t i = 0; i < raw.size(); ++i) {
-    // 0 = no measurement; else units of kDepthScaleM metres.
-    depth.data()[i] =
-        raw[i] == 0 ? kNaN : static_cast<float>(raw[i] * kDepthScaleM);
-  }
-  return depth;
-}
 
 /// Median of the valid depths in each factor x factor block.
 nf::ScalarMap poolDepth(const nf::ScalarMap& depth, int factor) {
@@ -234,19 +173,15 @@ struct Writer {
 
 int castel(const std::string& dir, const std::string& output, int frames) {
   const std::string seq = dir + "/castel/";
-  const nf::CameraIntrinsics K_c = readVispCamera(dir + "/chateau.xml");
-  const nf::CameraIntrinsics K_d = readVispCamera(dir + "/chateau_depth.xml");
-  const std::array<double, 16> d_M_c = readMatrix4(dir + "/depth_M_color.txt");
-  // color_M_depth = depth_M_color^-1: R_c_d = R^T, t_c_d = -R^T t.
-  std::array<double, 9> R_c_d;
-  std::array<double, 3> t_c_d;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) R_c_d[3 * r + c] = d_M_c[4 * c + r];
-  }
-  for (int r = 0; r < 3; ++r) {
-    t_c_d[r] = 0.0;
-    for (int k = 0; k < 3; ++k) t_c_d[r] -= R_c_d[3 * r + k] * d_M_c[4 * k + 3];
-  }
+  const nf::CameraIntrinsics K_c =
+      nf::castle::readIntrinsics(dir + "/chateau.xml");
+  const nf::CameraIntrinsics K_d =
+      nf::castle::readIntrinsics(dir + "/chateau_depth.xml");
+  // color_M_depth = depth_M_color^-1.
+  const nf::Pose T_c_d =
+      nf::inverse(nf::castle::readPose(dir + "/depth_M_color.txt"));
+  const std::array<double, 9>& R_c_d = T_c_d.R_cam_world;
+  const std::array<double, 3>& t_c_d = T_c_d.t_cam_world;
   Writer writer;
   writer.bag.open(output, rosbag::bagmode::Write);
   int written = 0;
@@ -256,7 +191,8 @@ int castel(const std::string& dir, const std::string& output, int frames) {
     const cv::Mat grey = cv::imread(seq + name, cv::IMREAD_GRAYSCALE);
     if (grey.empty()) break;
     std::snprintf(name, sizeof(name), "depth_image_%04d.bin", k);
-    const nf::ScalarMap depth = readVispDepth(seq + name);
+    const nf::ScalarMap depth =
+        nf::castle::readDepth(seq + name, nf::castel::kDepthScaleM);
     // Fine: the raw depth's normals, in the depth camera.
     const nf::NormalMap fine_d = nf::synthetic::normalsFromDepth(depth, K_d);
     // Coarse: pooled and smoothed depth at 1/4 size.
@@ -337,7 +273,7 @@ int synthetic(const std::string& output, const std::string& gt_output,
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output, dir = kCastelDir, gt_output;
+  std::string output, dir = nf::castel::kDefaultDirectory, gt_output;
   bool force_synthetic = false;
   int frames = 30;
   for (int i = 1; i < argc; ++i) {

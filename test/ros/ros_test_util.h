@@ -14,8 +14,8 @@
 #include <limits>
 #include <string>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {

@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
 #include "ros_test_util.h"
 
 namespace nf = normal_fusion;

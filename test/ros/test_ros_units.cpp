@@ -8,11 +8,11 @@
 #include <cstring>
 #include <random>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
 #include "normal_fusion/ros/parameters.h"
 #include "normal_fusion/ros/pipeline.h"
-#include "normal_fusion/synthetic.h"
 #include "ros_test_util.h"
 
 namespace normal_fusion {

@@ -11,9 +11,9 @@
 #include <random>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
 
 namespace nf = normal_fusion;
 namespace nd = normal_fusion::depth;

@@ -6,10 +6,10 @@
 #include <limits>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 #include "test_util.h"
 
 namespace normal_fusion {

@@ -16,7 +16,7 @@
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 
 namespace normal_fusion {
 namespace {

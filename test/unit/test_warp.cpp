@@ -6,8 +6,8 @@
 #include <cmath>
 #include <random>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
-#include "normal_fusion/synthetic.h"
 #include "normal_fusion/warp.h"
 
 namespace normal_fusion {

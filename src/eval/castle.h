@@ -22,7 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
@@ -53,11 +54,12 @@ std::vector<int> frameNumbers(const std::string& dir = kDefaultDirectory);
 
 /// Reads a depth file: z-depth in metres (value * scale_m), NaN where the file
 /// holds 0. Throws InputError for a missing, truncated or oversized file.
+/// The castel sequence's depth files have the same layout.
 ScalarMap readDepth(const std::string& path, double scale_m = kDepthScaleM);
 
 /// Reads a 4 x 4 homogeneous pose (16 numbers, row-major). Throws InputError
 /// when a number is missing, the last row is not (0, 0, 0, 1) or the rotation
-/// is not orthonormal (within 1e-4).
+/// is not one (isRotation).
 synthetic::Pose readPose(const std::string& path);
 
 /// Reads px, py, u0, v0 of the <camera> element of a ViSP tracker XML file.
@@ -128,4 +130,22 @@ Frame loadFrame(const std::string& dir, int number,
                 const LoadSettings& settings = LoadSettings());
 
 }  // namespace castle
+
+/// ViSP's real "castel" RGB-D sequence of an Intel SR300 (visp-images-data,
+/// ViSP-images/mbt-depth/castel), read with castle's readers: castel/
+/// image_NNNN.pgm (640 x 480 grey), castel/depth_image_NNNN.bin (castle's
+/// depth layout, kDepthScaleM metres per unit), chateau.xml and
+/// chateau_depth.xml (intrinsics of the colour and depth cameras) and
+/// depth_M_color.txt (the 4 x 4 pose of the colour camera in the depth
+/// camera: X_depth = depth_M_color X_color).
+namespace castel {
+
+/// Where Debian's visp-images-data package installs the sequence.
+constexpr const char* kDefaultDirectory =
+    "/usr/share/visp-images-data/ViSP-images/mbt-depth/castel";
+
+/// Metres per unit of the SR300 depth files of this sequence.
+constexpr double kDepthScaleM = 0.000124986647;
+
+}  // namespace castel
 }  // namespace normal_fusion

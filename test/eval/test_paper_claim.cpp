@@ -6,10 +6,10 @@
 
 #include <algorithm>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/bilateral.h"
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 
 namespace normal_fusion {
 namespace {

@@ -1,5 +1,5 @@
 // Synthetic indoor-like scenes (a small ray caster) and noise models.
-#include "normal_fusion/synthetic.h"
+#include "eval/synthetic.h"
 
 #include <algorithm>
 #include <array>
@@ -11,55 +11,22 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic_internal.h"
 #include "normal_fusion/errors.h"
 
 namespace normal_fusion {
 namespace synthetic {
+
+using namespace internal;  // NOLINT: the helpers shared with the noise models
+
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr float kMissing = std::numeric_limits<float>::quiet_NaN();
 /// Smallest ray parameter accepted as a hit (metres of z-depth).
 constexpr double kMinRayParameter = 1e-6;
 
-// ---------------------------------------------------------------------------
-// Small vector algebra.
-
-using Vec3 = std::array<double, 3>;
 using Rgb = std::array<double, 3>;
-
-inline Vec3 add(const Vec3& a, const Vec3& b) {
-  return {a[0] + b[0], a[1] + b[1], a[2] + b[2]};
-}
-inline Vec3 sub(const Vec3& a, const Vec3& b) {
-  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-}
-inline Vec3 scale(const Vec3& a, double s) {
-  return {a[0] * s, a[1] * s, a[2] * s};
-}
-inline double dot(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-inline Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-          a[0] * b[1] - a[1] * b[0]};
-}
-inline Vec3 normalized(const Vec3& a) {
-  return scale(a, 1.0 / std::sqrt(dot(a, a)));
-}
-/// Row-major 3x3 matrix times vector.
-inline Vec3 mul(const std::array<double, 9>& M, const Vec3& a) {
-  return {M[0] * a[0] + M[1] * a[1] + M[2] * a[2],
-          M[3] * a[0] + M[4] * a[1] + M[5] * a[2],
-          M[6] * a[0] + M[7] * a[1] + M[8] * a[2]};
-}
-/// Transposed row-major 3x3 matrix times vector.
-inline Vec3 mulTransposed(const std::array<double, 9>& M, const Vec3& a) {
-  return {M[0] * a[0] + M[3] * a[1] + M[6] * a[2],
-          M[1] * a[0] + M[4] * a[1] + M[7] * a[2],
-          M[2] * a[0] + M[5] * a[1] + M[8] * a[2]};
-}
 
 // ---------------------------------------------------------------------------
 // Scene description.
@@ -324,7 +291,7 @@ Pose poseFromCentre(const std::array<double, 9>& R_cam_world,
   Pose pose;
   pose.R_cam_world = R_cam_world;
   // t = -R C maps the camera centre to the camera origin.
-  const Vec3 t = scale(mul(R_cam_world, centre_world), -1.0);
+  const Vec3 t = scale(multiply(R_cam_world, centre_world), -1.0);
   pose.t_cam_world = {{t[0], t[1], t[2]}};
   return pose;
 }
@@ -511,65 +478,11 @@ double irradiance(const Lighting& light, const Vec3& p, const Vec3& n) {
   return light.ambient + directional + point;
 }
 
-void requireSize(int width, int height) {
-  if (width < 1 || height < 1) {
-    std::ostringstream msg;
-    msg << "synthetic render size " << width << "x" << height
-        << ": expected at least 1x1";
-    throw ParameterError(msg.str());
-  }
-}
-
-void requireFinite(const char* name, double value) {
-  if (!std::isfinite(value)) {
-    std::ostringstream msg;
-    msg << name << " = " << value << ": expected a finite number";
-    throw ParameterError(msg.str());
-  }
-}
-
-void requireRange(const char* name, double value, double lo, double hi) {
-  requireFinite(name, value);
-  if (value < lo || value > hi) {
-    std::ostringstream msg;
-    msg << name << " = " << value << ": expected in [" << lo << ", " << hi
-        << "]";
-    throw ParameterError(msg.str());
-  }
-}
-
-void requireNormalMap(const char* name, const NormalMap& normals) {
-  if (normals.channels() != 3) {
-    std::ostringstream msg;
-    msg << name << ": expected a normal map of 3 channels, got "
-        << normals.channels() << " channels (" << normals.width() << "x"
-        << normals.height() << ")";
-    throw InputError(msg.str());
-  }
-}
-
 void requireRotation(const Pose& pose) {
   const auto& R = pose.R_cam_world;
   for (double r : R) requireFinite("pose rotation entry", r);
   for (double t : pose.t_cam_world) requireFinite("pose translation entry", t);
-  // R R^T = I within rounding.
-  double worst = 0.0;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      const double rrt = R[3 * i] * R[3 * j] + R[3 * i + 1] * R[3 * j + 1] +
-                         R[3 * i + 2] * R[3 * j + 2];
-      worst = std::max(worst, std::abs(rrt - (i == j ? 1.0 : 0.0)));
-    }
-  }
-  const double det = R[0] * (R[4] * R[8] - R[5] * R[7]) -
-                     R[1] * (R[3] * R[8] - R[5] * R[6]) +
-                     R[2] * (R[3] * R[7] - R[4] * R[6]);
-  if (worst > 1e-6 || det < 0.0) {
-    std::ostringstream msg;
-    msg << "pose: R_cam_world is not a rotation (|R R^T - I| = " << worst
-        << ", det = " << det << "); expected an orthonormal matrix, det = +1";
-    throw ParameterError(msg.str());
-  }
+  if (!isRotation(R)) throw ParameterError(notRotationMessage("pose"));
 }
 
 Frame renderPrepared(const Scene& scene, int width, int height,
@@ -579,7 +492,7 @@ Frame renderPrepared(const Scene& scene, int width, int height,
   const auto& R = pose.R_cam_world;
   // Camera centre in the world: C = -R^T t.
   const Vec3 t{{pose.t_cam_world[0], pose.t_cam_world[1], pose.t_cam_world[2]}};
-  const Vec3 centre = scale(mulTransposed(R, t), -1.0);
+  const Vec3 centre = scale(multiplyTransposed(R, t), -1.0);
   for (int a = 0; a < 3; ++a) {
     if (!(centre[a] > scene.room.lo[a] && centre[a] < scene.room.hi[a])) {
       std::ostringstream msg;
@@ -605,9 +518,9 @@ Frame renderPrepared(const Scene& scene, int width, int height,
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
       // Ray of the pixel centre in the camera, then in the world.
-      const Vec3 ray_cam =
-          mul(K_inv, {{static_cast<double>(x), static_cast<double>(y), 1.0}});
-      const Vec3 ray_world = mulTransposed(R, ray_cam);
+      const Vec3 ray_cam = multiply(
+          K_inv, Vec3{{static_cast<double>(x), static_cast<double>(y), 1.0}});
+      const Vec3 ray_world = multiplyTransposed(R, ray_cam);
       SurfaceHit hit = trace(scene, centre, ray_world);
       if (!std::isfinite(hit.s)) {
         for (int c = 0; c < 3; ++c) {
@@ -625,7 +538,7 @@ Frame renderPrepared(const Scene& scene, int width, int height,
                  hit.v);
       const double light = irradiance(scene.lighting, point, hit.normal);
       // Camera-frame normal: n_cam = R n_world.
-      const Vec3 normal_cam = mul(R, hit.normal);
+      const Vec3 normal_cam = multiply(R, hit.normal);
       for (int c = 0; c < 3; ++c) {
         frame.image.at(c, y, x) =
             static_cast<float>(std::min(1.0, std::max(0.0, rho[c] * light)));
@@ -635,17 +548,6 @@ Frame renderPrepared(const Scene& scene, int width, int height,
     }
   }
   return frame;
-}
-
-/// Draws n' = (n + sigma g) / |n + sigma g|, g ~ N(0, I), in place.
-void perturbNormal(double sigma, std::mt19937_64* rng,
-                   std::normal_distribution<double>* gauss, float* n) {
-  double d[3];
-  for (int c = 0; c < 3; ++c) d[c] = n[c] + sigma * (*gauss)(*rng);
-  if (sigma == 0.0) return;  // exact copy, the draws keep the stream aligned
-  const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-  if (!(len > 1e-12)) return;
-  for (int c = 0; c < 3; ++c) n[c] = static_cast<float>(d[c] / len);
 }
 
 }  // namespace
@@ -702,158 +604,6 @@ std::vector<Frame> renderSequence(int scene_id, int width, int height,
     frames.back().stamp = k / fps;
   }
   return frames;
-}
-
-NormalMap addPaperNoise(const NormalMap& normals, double sigma,
-                        std::uint64_t seed) {
-  requireNormalMap("addPaperNoise", normals);
-  requireRange("addPaperNoise: sigma", sigma, 0.0, 1e6);
-  NormalMap out = normals;
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> gauss(0.0, 1.0);
-  float* px = out.plane(0);
-  float* py = out.plane(1);
-  float* pz = out.plane(2);
-  for (std::size_t i = 0; i < out.pixelCount(); ++i) {
-    float n[3] = {px[i], py[i], pz[i]};
-    const bool valid = isValidNormal(n[0], n[1], n[2]);
-    // Draw for every pixel so that a pixel's noise ignores the others' mask.
-    perturbNormal(sigma, &rng, &gauss, n);
-    if (!valid) continue;
-    px[i] = n[0];
-    py[i] = n[1];
-    pz[i] = n[2];
-  }
-  return out;
-}
-
-ScalarMap addDepthNoise(const ScalarMap& depth, double depth_sigma_at_1m,
-                        double quantization_m, double dropout,
-                        std::uint64_t seed) {
-  if (depth.channels() != 1) {
-    std::ostringstream msg;
-    msg << "addDepthNoise: expected a depth map of 1 channel, got "
-        << depth.channels();
-    throw InputError(msg.str());
-  }
-  requireRange("addDepthNoise: depth_sigma_at_1m", depth_sigma_at_1m, 0.0, 1e3);
-  requireRange("addDepthNoise: quantization_m", quantization_m, 0.0, 1e3);
-  requireRange("addDepthNoise: dropout", dropout, 0.0, 1.0);
-  ScalarMap out = depth;
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> gauss(0.0, 1.0);
-  std::uniform_real_distribution<double> uniform01(0.0, 1.0);
-  float* z_out = out.data();
-  for (std::size_t i = 0; i < out.pixelCount(); ++i) {
-    const double g = gauss(rng);
-    const double keep = uniform01(rng);
-    const double z = z_out[i];
-    if (!std::isfinite(z) || !(z > 0.0)) {
-      z_out[i] = kMissing;
-      continue;
-    }
-    // Axial noise grows with z^2: z + sigma_1m z^2 g.
-    double z_noisy = z + depth_sigma_at_1m * z * z * g;
-    // Quantization: nearest multiple of q.
-    if (quantization_m > 0.0) {
-      z_noisy = quantization_m * std::round(z_noisy / quantization_m);
-    }
-    const bool lost = keep < dropout || !(z_noisy > 0.0);
-    z_out[i] = lost ? kMissing : static_cast<float>(z_noisy);
-  }
-  return out;
-}
-
-NormalMap normalsFromDepth(const ScalarMap& depth, const CameraIntrinsics& K) {
-  if (depth.channels() != 1) {
-    std::ostringstream msg;
-    msg << "normalsFromDepth: expected a depth map of 1 channel, got "
-        << depth.channels();
-    throw InputError(msg.str());
-  }
-  const std::array<double, 9> K_inv = K.inverse();
-  const int width = depth.width();
-  const int height = depth.height();
-  NormalMap normals(width, height, 3, kMissing);
-  const auto valid_depth = [&](int y, int x) {
-    const float z = depth.at(0, y, x);
-    return std::isfinite(z) && z > 0.0f;
-  };
-  // Back-projection P(u, v) = z K^-1 (u, v, 1).
-  const auto point = [&](int y, int x) {
-    const Vec3 ray =
-        mul(K_inv, {{static_cast<double>(x), static_cast<double>(y), 1.0}});
-    return scale(ray, static_cast<double>(depth.at(0, y, x)));
-  };
-#pragma omp parallel for schedule(static)
-  for (int y = 1; y < height - 1; ++y) {
-    for (int x = 1; x < width - 1; ++x) {
-      if (!valid_depth(y, x) || !valid_depth(y, x - 1) ||
-          !valid_depth(y, x + 1) || !valid_depth(y - 1, x) ||
-          !valid_depth(y + 1, x)) {
-        continue;
-      }
-      // Central differences along u and v, and their cross product.
-      const Vec3 du = sub(point(y, x + 1), point(y, x - 1));
-      const Vec3 dv = sub(point(y + 1, x), point(y - 1, x));
-      Vec3 n = cross(du, dv);
-      const double len = std::sqrt(dot(n, n));
-      if (!(len > 0.0) || !std::isfinite(len)) continue;
-      n = scale(n, 1.0 / len);
-      // Face the camera: n . K^-1 (u, v, 1) <= 0.
-      const Vec3 ray =
-          mul(K_inv, {{static_cast<double>(x), static_cast<double>(y), 1.0}});
-      if (dot(n, ray) > 0.0) n = scale(n, -1.0);
-      for (int c = 0; c < 3; ++c) {
-        normals.at(c, y, x) = static_cast<float>(n[c]);
-      }
-    }
-  }
-  return normals;
-}
-
-NormalMap normalsFromNoisyDepth(const Frame& frame, double depth_sigma_at_1m,
-                                double dropout, std::uint64_t seed) {
-  return normalsFromDepth(addDepthNoise(frame.depth, depth_sigma_at_1m,
-                                        kDepthQuantizationM, dropout, seed),
-                          frame.K);
-}
-
-NormalMap sparseAccurate(const NormalMap& normals_gt, double density,
-                         double sigma, std::uint64_t seed) {
-  requireNormalMap("sparseAccurate", normals_gt);
-  requireRange("sparseAccurate: density", density, 0.0, 1.0);
-  requireRange("sparseAccurate: sigma", sigma, 0.0, 1e6);
-  NormalMap out(normals_gt.width(), normals_gt.height(), 3, kMissing);
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> gauss(0.0, 1.0);
-  std::uniform_real_distribution<double> uniform01(0.0, 1.0);
-  for (std::size_t i = 0; i < out.pixelCount(); ++i) {
-    float n[3] = {normals_gt.plane(0)[i], normals_gt.plane(1)[i],
-                  normals_gt.plane(2)[i]};
-    // Keep with probability `density`; draw for every pixel (mask-independent).
-    const bool keep = uniform01(rng) < density;
-    perturbNormal(sigma, &rng, &gauss, n);
-    if (!keep || !isValidNormal(normals_gt.plane(0)[i], normals_gt.plane(1)[i],
-                                normals_gt.plane(2)[i])) {
-      continue;
-    }
-    for (int c = 0; c < 3; ++c) out.plane(c)[i] = n[c];
-  }
-  return out;
-}
-
-std::array<double, 9> relativeRotation(const Pose& cur, const Pose& prev) {
-  std::array<double, 9> R{};
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      for (int k = 0; k < 3; ++k) {
-        R[3 * i + j] +=
-            cur.R_cam_world[3 * i + k] * prev.R_cam_world[3 * j + k];
-      }
-    }
-  }
-  return R;
 }
 
 }  // namespace synthetic

@@ -7,10 +7,10 @@
 
 #include <algorithm>
 
+#include "eval/peers.h"
+#include "eval/synthetic.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/peers.h"
 #include "normal_fusion/solver.h"
-#include "normal_fusion/synthetic.h"
 
 namespace normal_fusion {
 namespace {

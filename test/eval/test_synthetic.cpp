@@ -8,8 +8,8 @@
 #include <limits>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
-#include "normal_fusion/synthetic.h"
 
 namespace normal_fusion {
 namespace {

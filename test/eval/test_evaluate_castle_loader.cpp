@@ -14,10 +14,10 @@
 #include <string>
 #include <vector>
 
-#include "normal_fusion/castle.h"
+#include "eval/castle.h"
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/synthetic.h"
 
 namespace normal_fusion {
 namespace {

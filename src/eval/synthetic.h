@@ -9,20 +9,18 @@
 #include <cstdint>
 #include <vector>
 
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
 namespace synthetic {
 
 /// Camera pose: world point X maps to camera point R_cam_world X + t_cam_world.
-struct Pose {
-  std::array<double, 9> R_cam_world{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
-  std::array<double, 3> t_cam_world{{0, 0, 0}};
-};
+using Pose = normal_fusion::Pose;
 
 /// Rotation of the camera from `prev` to `cur`: R_cur_prev = R_cur_world
 /// R_prev_world^T (the argument warpStateByRotation takes).
-std::array<double, 9> relativeRotation(const Pose& cur, const Pose& prev);
+Mat3 relativeRotation(const Pose& cur, const Pose& prev);
 
 /// One rendered view.
 struct Frame {

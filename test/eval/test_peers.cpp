@@ -6,9 +6,9 @@
 #include <cmath>
 #include <limits>
 
+#include "eval/peers.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
-#include "normal_fusion/peers.h"
 #include "test_util.h"
 
 namespace normal_fusion {

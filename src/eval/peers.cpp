@@ -1,4 +1,4 @@
-#include "normal_fusion/peers.h"
+#include "eval/peers.h"
 
 #include <cmath>
 #include <limits>
