@@ -2,13 +2,9 @@
 // their links and ghosts gathered into contiguous arrays (ActiveBuffers) and
 // written back, and the choice of its thread count (RefineThreadChooser).
 // Its kernel is in kernels_fast_active.cpp.
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
-#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 
 namespace normal_fusion {
@@ -147,6 +143,11 @@ void ActiveBuffers::gatherTopology(const PreparedLevel& level,
   link_a[num_links] = link_b[num_links] = 0;
   link_w[num_links] = 0.0f;
   for (int ch = 0; ch < 3; ++ch) p[ch][num_links] = 0.0f;
+  sizeNodeBuffers();
+}
+
+void ActiveBuffers::sizeNodeBuffers() {
+  const int L = num_inputs, P = num_active;
   const long num_nodes = static_cast<long>(node_pixel.size());
   for (int ch = 0; ch < 3; ++ch) {
     growTo(nbar[ch], num_nodes);

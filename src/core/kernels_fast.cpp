@@ -38,6 +38,9 @@ inline Planes3 rowOf(PlanarImage& img, std::size_t offset) {
 inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
   return {img.plane(0) + offset, img.plane(1) + offset, img.plane(2) + offset};
 }
+
+// Row kernels: NF_MULTIVERSION (AVX-512, AVX2 and baseline x86-64 clones).
+
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
 /// direction, with g = next - here given as two row pointers.
 NF_MULTIVERSION

@@ -3,13 +3,9 @@
 // restricted to it (the reference backend's per-pixel steps through index
 // lists; every other pixel held fixed) and its terms of E. The work is in
 // proportion to the active pixels, not the image.
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
-#include "normal_fusion/detail/multiversion.h"
 #include "normal_fusion/detail/solver_internal.h"
 
 namespace normal_fusion {

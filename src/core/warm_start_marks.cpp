@@ -1,8 +1,6 @@
 // The pixels of a warm start to refine: those the inputs contradict, the
 // edges of the warm map, and the fill of the unknown ones from their known
 // neighbours.
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>

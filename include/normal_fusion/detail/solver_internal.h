@@ -239,6 +239,9 @@ struct ActiveBuffers {
   /// gather()'s first part: numbers the nodes and the links, sizes the
   /// buffers (one thread).
   void gatherTopology(const PreparedLevel& level, const ActiveSet& active);
+  /// Sizes the buffers of the nodes and the active pixels once they are
+  /// numbered.
+  void sizeNodeBuffers();
   /// gather()'s second part: copies the values, with `threads`.
   void gatherValues(const PreparedLevel& level, const IterationState& state,
                     int threads);
