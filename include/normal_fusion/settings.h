@@ -151,7 +151,8 @@ struct SolverSettings {
   /// is set. 0 = none (the iteration caps and the tolerance end it), > 0 =
   /// this many ms. Warm frames carry a cold start's map on and refine only
   /// where the view changed, so a stream's quality is set by how well its
-  /// first frame was solved (bench_streaming --cold-start-budget-ms).
+  /// first frame was solved: cut to a live frame's budget it leaves a much
+  /// worse map for many frames (docs/experiments/2026-11.md).
   /// Solves not asked to warm-start keep time_budget_ms.
   double cold_start_budget_ms = settings_default::cold_start_budget_ms;
 
@@ -183,8 +184,8 @@ struct SolverSettings {
   /// take the larger steps. 1 = the steps above; in [1e-3, 1e3]; not applied
   /// to explicit tau and sigma, nor to the warm start's local refinement and
   /// the pyramid's coarser levels, which keep 1 (their normals start far
-  /// from their solution: filled in, or cold). Why below 1:
-  /// docs/performance.md (bench_time_to_solution).
+  /// from their solution: filled in, or cold). 0.25 because it reaches the
+  /// converged energy sooner than 1 (docs/performance.md, time to solution).
   double step_balance = settings_default::step_balance;
 
   /// Throws ParameterError naming the first setting that is out of the

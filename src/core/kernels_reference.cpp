@@ -212,5 +212,43 @@ bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
   return true;
 }
 
+double energy(const PreparedLevel& level, double huber_eps, DataPenalty penalty,
+              const PlanarImage& normals, int num_threads) {
+  const int W = level.width, H = level.height;
+  double total = 0.0;
+#pragma omp parallel for num_threads(num_threads) reduction(+ : total) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    double row_sum = 0.0;
+    for (int x = 0; x < W; ++x) {
+      const double n[3] = {normals.at(0, y, x), normals.at(1, y, x),
+                           normals.at(2, y, x)};
+      // Data terms: sum_l c_l phi(n - f_l).
+      row_sum +=
+          dataEnergyAt(level, penalty, static_cast<std::size_t>(y) * W + x, n);
+      // Smoothness: w_h huber(grad_h n) + w_v huber(grad_v n).
+      if (x + 1 < W) {
+        double g2 = 0.0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const double g = normals.at(ch, y, x + 1) - n[ch];
+          g2 += g * g;
+        }
+        row_sum += level.edge_weight.at(0, y, x) *
+                   huberPenalty(std::sqrt(g2), huber_eps);
+      }
+      if (y + 1 < H) {
+        double g2 = 0.0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const double g = normals.at(ch, y + 1, x) - n[ch];
+          g2 += g * g;
+        }
+        row_sum += level.edge_weight.at(1, y, x) *
+                   huberPenalty(std::sqrt(g2), huber_eps);
+      }
+    }
+    total += row_sum;
+  }
+  return total;
+}
+
 }  // namespace internal
 }  // namespace normal_fusion

@@ -236,6 +236,15 @@ struct ActiveBuffers {
   /// copied with `threads`.
   void gather(const PreparedLevel& level, const IterationState& state,
               const ActiveSet& active, int threads = 1);
+  /// gather()'s first part: numbers the nodes and the links, sizes the
+  /// buffers (one thread).
+  void gatherTopology(const PreparedLevel& level, const ActiveSet& active);
+  /// Sizes the buffers of the nodes and the active pixels once they are
+  /// numbered.
+  void sizeNodeBuffers();
+  /// gather()'s second part: copies the values, with `threads`.
+  void gatherValues(const PreparedLevel& level, const IterationState& state,
+                    int threads);
   /// node_n <- n / |n| at the active pixels (the candidate of an outer step).
   void normalizeCandidate();
   /// The terms of E that involve an active pixel, at node_n (as

@@ -1,0 +1,33 @@
+// The levels of a solve (solver_levels.cpp): the coarse-to-fine pyramid and
+// the starts of each level's iterations.
+#pragma once
+
+#include "normal_fusion/detail/solver_internal.h"
+
+namespace normal_fusion {
+namespace internal {
+
+/// The next coarser level (into reused buffers): 2x2 blocks, validity-weighted
+/// means of the data (normalized), weights averaged and doubled (the data term
+/// scales with area, the smoothness term with length), K scaled, edge weights
+/// recomputed.
+void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
+                    PreparedLevel& coarse, EdgeWeightScratch& scratch,
+                    int threads);
+
+/// Cold start: per pixel the first input with a usable observation
+/// (projected onto the visible set in soft mode), else -r/|r|.
+void initializeCold(const PreparedLevel& level, VisibilityMode mode,
+                    PlanarImage& n, int threads);
+
+/// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
+/// normalizes, and projects onto the visible set in soft mode.
+void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
+                     VisibilityMode mode, PlanarImage& n, int threads);
+
+/// out <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
+/// tangent plane).
+void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads);
+
+}  // namespace internal
+}  // namespace normal_fusion

@@ -1,0 +1,286 @@
+// The levels of a solve: the coarser pyramid levels, the cold start, the
+// upsampling of a coarser level's result, the projection onto the sphere
+// after an outer step, and a warm start made usable.
+#include "normal_fusion/detail/solver_levels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "normal_fusion/detail/multiversion.h"
+
+namespace normal_fusion {
+namespace internal {
+
+namespace {
+
+/// The largest finite float (comparisons against it reject infinities and
+/// NaN alike).
+constexpr float kFloatMax = std::numeric_limits<float>::max();
+
+}  // namespace
+
+/// The next coarser level (into reused buffers): 2x2 blocks, validity-weighted
+/// means of the data (normalized), weights averaged and doubled (the data term
+/// scales with area, the smoothness term with length), K scaled, edge weights
+/// recomputed.
+void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
+                    PreparedLevel& coarse, EdgeWeightScratch& scratch,
+                    int threads) {
+  const int W = (fine.width + 1) / 2, H = (fine.height + 1) / 2;
+  const int L = fine.num_inputs;
+  coarse.width = W;
+  coarse.height = H;
+  coarse.num_inputs = L;
+  coarse.K = fine.K.scaled(static_cast<double>(W) / fine.width,
+                           static_cast<double>(H) / fine.height);
+  coarse.K_inv = coarse.K.inverse();
+  const ColorImage& fine_image = fine.guide();
+  coarse.image.resize(W, H, fine_image.channels());
+  coarse.problem_image = nullptr;
+  coarse.data.resize(L);
+  coarse.data_weight.resize(L);
+  coarse.data_eps.resize(L);
+  coarse.data_huber = fine.data_huber;
+  for (int l = 0; l < L; ++l) {
+    coarse.data[l].resize(W, H, 3);
+    coarse.data_weight[l].resize(W, H, 1);
+    coarse.data_eps[l].resize(W, H, 1);
+  }
+  long valid = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : valid)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = static_cast<std::size_t>(y) * W + x;
+      const int x0 = 2 * x, x1 = std::min(2 * x + 1, fine.width - 1);
+      const int y0 = 2 * y, y1 = std::min(2 * y + 1, fine.height - 1);
+      const int xs[4] = {x0, x1, x0, x1};
+      const int ys[4] = {y0, y0, y1, y1};
+      const int count = (x1 > x0 ? 2 : 1) * (y1 > y0 ? 2 : 1);
+      // Blocks at an odd border repeat a pixel: visit each pixel once.
+      auto duplicate = [&](int k) {
+        return (k == 1 && x1 == x0) || (k == 2 && y1 == y0) ||
+               (k == 3 && (x1 == x0 || y1 == y0));
+      };
+      for (int c = 0; c < fine_image.channels(); ++c) {
+        float sum = 0.0f;
+        for (int k = 0; k < 4; ++k) {
+          if (!duplicate(k)) sum += fine_image.at(c, ys[k], xs[k]);
+        }
+        coarse.image.plane(c)[j] = sum / count;
+      }
+      bool any_valid = false;
+      for (int l = 0; l < L; ++l) {
+        double f_sum[3] = {0.0, 0.0, 0.0};
+        double c_sum = 0.0, eps_sum = 0.0;
+        for (int k = 0; k < 4; ++k) {
+          if (duplicate(k)) continue;
+          const float cw = fine.data_weight[l].at(0, ys[k], xs[k]);
+          c_sum += cw;
+          if (fine.data_huber) {
+            eps_sum += cw * fine.data_eps[l].at(0, ys[k], xs[k]);
+          }
+          for (int c = 0; c < 3; ++c)
+            f_sum[c] += cw * fine.data[l].at(c, ys[k], xs[k]);
+        }
+        const double len = std::sqrt(f_sum[0] * f_sum[0] + f_sum[1] * f_sum[1] +
+                                     f_sum[2] * f_sum[2]);
+        const bool ok = c_sum > 0.0 && len > 1e-9;
+        for (int c = 0; c < 3; ++c) {
+          coarse.data[l].plane(c)[j] =
+              ok ? static_cast<float>(f_sum[c] / len) : 0.0f;
+        }
+        coarse.data_weight[l].plane(0)[j] =
+            ok ? static_cast<float>(2.0 * c_sum / count) : 0.0f;
+        // delta: the weighted mean of the block's thresholds.
+        coarse.data_eps[l].plane(0)[j] =
+            ok && fine.data_huber ? static_cast<float>(eps_sum / c_sum) : 0.0f;
+        any_valid = any_valid || ok;
+      }
+      valid += any_valid ? 1 : 0;
+    }
+  }
+  coarse.valid_pixels = static_cast<int>(valid);
+  computeEdgeWeightsInto(coarse.image, settings.edges, coarse.edge_weight,
+                         scratch, threads);
+}
+
+namespace {
+
+/// Cold start of one pixel: the first input with a usable observation
+/// (projected onto the visible set in soft mode), else -r/|r|.
+void coldNormal(const PreparedLevel& level, VisibilityMode mode, int x, int y,
+                float v[3]) {
+  float r[3];
+  level.ray(x, y, r);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    if (level.data_weight[l].at(0, y, x) > 0.0f) {
+      for (int c = 0; c < 3; ++c) v[c] = level.data[l].at(c, y, x);
+      if (mode == VisibilityMode::kSoft) projectVisible(r, v);
+      return;
+    }
+  }
+  const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+  for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+}
+
+}  // namespace
+
+void initializeCold(const PreparedLevel& level, VisibilityMode mode,
+                    PlanarImage& n, int threads) {
+  n.resizeKeepingCapacity(level.width, level.height, 3);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < level.height; ++y) {
+    for (int x = 0; x < level.width; ++x) {
+      float v[3];
+      coldNormal(level, mode, x, y, v);
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    }
+  }
+}
+
+namespace {
+
+/// One row of a warm start's normals made usable, branch-free
+/// (vectorised): n / |n|, projected onto the visible set in soft mode
+/// (projectVisible(), with the ray K^-1 (x, y, 1) in float); missing[x] = 1
+/// where |n| is zero, tiny or not finite (n is then left for coldNormal()).
+template <bool kSoft>
+NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
+                                     float* __restrict nx, float* __restrict ny,
+                                     float* __restrict nz,
+                                     unsigned char* __restrict missing) {
+  const float ry0 = Ki[1] * y + Ki[2], ry1 = Ki[4] * y + Ki[5],
+              ry2 = Ki[7] * y + Ki[8];
+  for (int x = 0; x < W; ++x) {
+    const float len2 = nx[x] * nx[x] + ny[x] * ny[x] + nz[x] * nz[x];
+    // Not NaN, not infinite (both comparisons fail), not tiny.
+    const bool usable = (len2 > 1e-12f) & (len2 <= kFloatMax);
+    missing[x] = usable ? 0 : 1;
+    const float inv = 1.0f / std::sqrt(usable ? len2 : 1.0f);
+    float v0 = nx[x] * inv, v1 = ny[x] * inv, v2 = nz[x] * inv;
+    if (kSoft) {
+      // projectVisible(): facing away (r . v > 0) -> onto the plane normal
+      // to r, or -r / |r| when v is (nearly) r itself.
+      const float fx = static_cast<float>(x);
+      const float r0 = Ki[0] * fx + ry0, r1 = Ki[3] * fx + ry1,
+                  r2 = Ki[6] * fx + ry2;
+      const float rn = r0 * v0 + r1 * v1 + r2 * v2;
+      const float rr = r0 * r0 + r1 * r1 + r2 * r2;
+      const float m0 = v0 * rr - r0 * rn, m1 = v1 * rr - r1 * rn,
+                  m2 = v2 * rr - r2 * rn;
+      const float m_len = std::sqrt(m0 * m0 + m1 * m1 + m2 * m2);
+      const bool away = rn > 0.0f;
+      const bool degenerate = m_len <= 1e-6f * rr;
+      const float inv_m = 1.0f / (degenerate ? 1.0f : m_len);
+      const float inv_r = 1.0f / std::sqrt(rr);
+      const float p0 = degenerate ? -r0 * inv_r : m0 * inv_m;
+      const float p1 = degenerate ? -r1 * inv_r : m1 * inv_m;
+      const float p2 = degenerate ? -r2 * inv_r : m2 * inv_m;
+      v0 = away ? p0 : v0;
+      v1 = away ? p1 : v1;
+      v2 = away ? p2 : v2;
+    }
+    nx[x] = usable ? v0 : nx[x];
+    ny[x] = usable ? v1 : ny[x];
+    nz[x] = usable ? v2 : nz[x];
+  }
+}
+
+}  // namespace
+
+/// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
+/// normalizes, and projects onto the visible set in soft mode (rows shared by
+/// `threads`).
+void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
+                     VisibilityMode mode, PlanarImage& n, int threads) {
+  n.resizeKeepingCapacity(fine.width, fine.height, 3);
+  const double sx = static_cast<double>(coarse.width()) / fine.width;
+  const double sy = static_cast<double>(coarse.height()) / fine.height;
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < fine.height; ++y) {
+    const double cy =
+        std::min(std::max(sy * (y + 0.5) - 0.5, 0.0), coarse.height() - 1.0);
+    const int y0 = static_cast<int>(cy);
+    const int y1 = std::min(y0 + 1, coarse.height() - 1);
+    const float ty = static_cast<float>(cy - y0);
+    for (int x = 0; x < fine.width; ++x) {
+      const double cx =
+          std::min(std::max(sx * (x + 0.5) - 0.5, 0.0), coarse.width() - 1.0);
+      const int x0 = static_cast<int>(cx);
+      const int x1 = std::min(x0 + 1, coarse.width() - 1);
+      const float tx = static_cast<float>(cx - x0);
+      float v[3];
+      for (int c = 0; c < 3; ++c) {
+        v[c] =
+            (1 - ty) *
+                ((1 - tx) * coarse.at(c, y0, x0) + tx * coarse.at(c, y0, x1)) +
+            ty * ((1 - tx) * coarse.at(c, y1, x0) + tx * coarse.at(c, y1, x1));
+      }
+      float r[3];
+      fine.ray(x, y, r);
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      if (len > 1e-6f) {
+        for (float& value : v) value /= len;
+      } else {
+        const float rl = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+        for (int c = 0; c < 3; ++c) v[c] = -r[c] / rl;
+      }
+      if (mode == VisibilityMode::kSoft) projectVisible(r, v);
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
+    }
+  }
+}
+
+/// n <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
+/// tangent plane).
+void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {
+  out.resizeKeepingCapacity(n.width(), n.height(), 3);
+  const long N = static_cast<long>(n.pixelCount());
+  const float* nx = n.plane(0);
+  const float* ny = n.plane(1);
+  const float* nz = n.plane(2);
+  float* ox = out.plane(0);
+  float* oy = out.plane(1);
+  float* oz = out.plane(2);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (long i = 0; i < N; ++i) {
+    const float inv =
+        1.0f / std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+    ox[i] = nx[i] * inv;
+    oy[i] = ny[i] * inv;
+    oz[i] = nz[i] * inv;
+  }
+}
+
+void sanitizeWarmStart(const PreparedLevel& level, VisibilityMode mode,
+                       PlanarImage& n, std::vector<unsigned char>& unknown,
+                       int threads) {
+  const int W = level.width;
+  unknown.resize(static_cast<std::size_t>(W) * level.height);
+  const bool soft = mode == VisibilityMode::kSoft;
+  const float Ki[9] = {
+      static_cast<float>(level.K_inv[0]), static_cast<float>(level.K_inv[1]),
+      static_cast<float>(level.K_inv[2]), static_cast<float>(level.K_inv[3]),
+      static_cast<float>(level.K_inv[4]), static_cast<float>(level.K_inv[5]),
+      static_cast<float>(level.K_inv[6]), static_cast<float>(level.K_inv[7]),
+      static_cast<float>(level.K_inv[8])};
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < level.height; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    (soft ? sanitizeWarmRow<true>
+          : sanitizeWarmRow<false>)(W, static_cast<float>(y), Ki,
+                                    n.plane(0) + row, n.plane(1) + row,
+                                    n.plane(2) + row, unknown.data() + row);
+    // The missing ones start as a cold start would.
+    for (int x = 0; x < W; ++x) {
+      if (unknown[row + x] == 0) continue;
+      float v[3];
+      coldNormal(level, mode, x, y, v);
+      for (int c = 0; c < 3; ++c) n.plane(c)[row + x] = v[c];
+    }
+  }
+}
+}  // namespace internal
+}  // namespace normal_fusion

@@ -1,0 +1,250 @@
+// The outer loop of docs/algorithm.md at one level: majorize-minimize, each
+// outer step a run of inner Chambolle-Pock iterations on the tangent plane at
+// n0 (in chunks that the deadline sizes) and the projection n0 <- n / |n|
+// kept when it lowers E; and the same on the active pixels of a warm start's
+// local refinement. The kernels are the backend's (detail/kernel_backend.h).
+#include <algorithm>
+#include <utility>
+
+#include "normal_fusion/detail/solver_levels.h"
+#include "solver_impl.h"
+
+namespace normal_fusion {
+
+using internal::InnerParams;
+using internal::PreparedLevel;
+using namespace solver_constants;
+
+namespace {
+
+/// Seconds from `t` to now.
+double secondsSince(SolverImpl::Clock::time_point t) {
+  return std::chrono::duration<double>(SolverImpl::Clock::now() - t).count();
+}
+
+}  // namespace
+
+void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
+                          SolveReport& report) {
+  internal::IterationState& s = state_;
+  const InnerParams params =
+      innerParams(level, finest ? settings_.step_balance : kCoarseStepBalance);
+  const internal::EnergyTerms terms = energyTerms();
+  const Clock::time_point level_start = Clock::now();
+  double best = backend_->energy(level, terms, s.n0, threads_);
+  const double energy_seconds = secondsSince(level_start);
+  // What closing an outer step costs (normalize + energy), for the budget.
+  double finish_seconds = 1.5 * secondsSince(level_start);
+  if (finest) {
+    report.initial_energy = best;
+    recordEnergy(report, best);
+  }
+  s.n = s.n0;
+  s.nbar = s.n0;
+  // Each level may use the whole iteration cap; coarse levels are cheap.
+  // Coarse levels only prepare a start for the next finer one: a few outer
+  // steps each (kCoarseOuterSteps) and a looser tolerance.
+  int remaining =
+      finest ? remaining_inner_
+             : std::min(settings_.max_total_inner_iterations,
+                        kCoarseOuterSteps * settings_.inner_iterations);
+  const double tolerance =
+      finest ? settings_.relative_tolerance
+             : std::max(settings_.relative_tolerance, kCoarseTolerance);
+  double seconds_per_iteration = 0.0;
+  for (int outer = 0; outer < settings_.max_outer_iterations && remaining > 0;
+       ++outer) {
+    const StepIterations step = runStepIterations(
+        level, params, std::min(settings_.inner_iterations, remaining),
+        finish_seconds, seconds_per_iteration);
+    int& counted =
+        finest ? report.inner_iterations : report.coarse_inner_iterations;
+    counted += step.done;
+    // Cancelled: only whole chunks count; the outer step is not closed.
+    if (cancelled()) break;
+    remaining -= step.done;
+    if (finest) report.outer_iterations += 1;
+    // Re-linearize: the normalized iterate replaces n0 when E does not rise.
+    const Clock::time_point finish_start = Clock::now();
+    internal::normalizeInto(s.n, candidate_, threads_);
+    const double e = backend_->energy(level, terms, candidate_, threads_);
+    finish_seconds = secondsSince(finish_start);
+    if (finest) {
+      // The least a finest level costs: its first energy, a first chunk of 2
+      // iterations and one closing step.
+      level_seconds_ =
+          energy_seconds + 2.0 * seconds_per_iteration + finish_seconds;
+    }
+    bool converged = false;
+    if (e <= best) {
+      const double decrease = (best - e) / std::max(best, 1e-30);
+      best = e;
+      std::swap(s.n0, candidate_);
+      s.n = s.n0;
+      s.nbar = s.n0;
+      if (finest) recordEnergy(report, e);
+      converged = decrease < tolerance;
+    } else if (finest) {
+      report.rejected_outer_steps += 1;
+    }
+    if (step.out_of_time) {
+      report.budget_exhausted = true;
+      break;
+    }
+    if (converged) {
+      if (finest) report.converged = true;
+      break;
+    }
+  }
+  if (finest) remaining_inner_ = remaining;
+}
+
+SolverImpl::StepIterations SolverImpl::runStepIterations(
+    const PreparedLevel& level, const InnerParams& params, int target,
+    double finish_seconds, double& seconds_per_iteration) {
+  // Without a budget, whole outer steps; with one, chunks sized so that the
+  // next chunk and the closing step still fit (2 iterations to measure
+  // first).
+  const int first_chunk = deadline_.active() ? 2 : settings_.inner_iterations;
+  StepIterations step;
+  while (step.done < target) {
+    const int k = deadline_.chunkIterations(
+        target - step.done, seconds_per_iteration, finish_seconds, first_chunk,
+        4 * threads_ * kBlockDepth);
+    const Clock::time_point chunk_start = Clock::now();
+    // A cancel request stops the iterations inside the chunk (its iterate
+    // is then dropped: n0 is the last accepted step).
+    if (!backend_->runInner(level, params, state_, k)) {
+      cancelled_ = true;
+      break;
+    }
+    seconds_per_iteration = secondsSince(chunk_start) / k;
+    step.done += k;
+    if (!deadline_.allowsChunk(seconds_per_iteration, finish_seconds)) {
+      step.out_of_time = true;
+      break;
+    }
+  }
+  return step;
+}
+
+void SolverImpl::startWarm(const PreparedLevel& level, SolverState& out,
+                           SolveReport& report) {
+  internal::IterationState& s = state_;
+  const Clock::time_point warm_start = Clock::now();
+  // The previous normals (sanitized) and duals, swapped in rather than
+  // copied (same sizes: no allocation either way).
+  std::swap(s.n0, out.normals);
+  internal::sanitizeWarmStart(level, settings_.visibility, s.n0, unknown_,
+                              threads_);
+  std::swap(s.p_h, out.dual_h);
+  std::swap(s.p_v, out.dual_v);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    std::swap(s.q[l], out.dual_data[l]);
+  }
+  // Pixels whose warm normal the current inputs contradict (content that
+  // changed or moved unlike the warp assumed) count as unknown.
+  const bool refine = settings_.warm_refine_iterations > 0 && !cancelled();
+  if (refine) {
+    report.inconsistent_pixels = internal::markInconsistentPixels(
+        level, s.n0, settings_.local_radius, unknown_, threads_);
+    // The edges of the warm map: seeds of the refinement too (their warm
+    // normals kept as its start), since the camera's translation moves them.
+    report.edge_pixels =
+        internal::markMapEdges(s.n0, unknown_, edge_scratch_map_, threads_);
+  }
+  if (!refine || cancelled() ||
+      std::none_of(unknown_.begin(), unknown_.end(),
+                   [](unsigned char u) { return u != 0; })) {
+    report.warm_start_seconds = secondsSince(warm_start);
+    return;
+  }
+  refine_.active.build(unknown_, level.width, level.height,
+                       settings_.warm_refine_radius);
+  // Unknown pixels (1) are filled from their known neighbours (the other
+  // seeds, 2, keep their warm normals); then the active pixels are refined.
+  // unknown_ now says: known.
+  for (unsigned char& u : unknown_) u = u == 1 ? 0 : 1;
+  if (!cancelled()) {
+    internal::fillUnknownPixels(level, settings_.huber_eps, settings_.penalty,
+                                settings_.visibility == VisibilityMode::kSoft,
+                                s.n0, unknown_, refine_.active, kFillPasses,
+                                edge_scratch_map_, fill_pending_, threads_,
+                                &cancel_request_);
+  }
+  report.warm_start_seconds = secondsSince(warm_start);
+  if (!cancelled()) refineActive(level, report);
+  report.refine_seconds = secondsSince(warm_start) - report.warm_start_seconds;
+}
+
+void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
+  // Short outer steps (kRefineStepIterations). A step is kept when the
+  // active pixels' terms of E do not rise, so E does not; a rejected one
+  // goes on from its iterate on the same tangent planes.
+  const InnerParams params = innerParams(level, kRefineStepBalance);
+  const internal::EnergyTerms terms = energyTerms();
+  const bool measured = backend_->measuresRefinementThreads();
+  const long count = static_cast<long>(refine_.active.pixels.size());
+  report.refined_pixels = static_cast<int>(count);
+  double best =
+      backend_->beginRefinement(level, terms, state_, refine_, threads_);
+  int remaining = settings_.warm_refine_iterations;
+  double step_seconds = 0.0;  // what the last outer step took
+  // A cancel request ends it before a step, or inside one (the step is then
+  // dropped: n0 holds the last accepted one).
+  while (remaining > 0 && !cancelled()) {
+    const Clock::time_point step_start = Clock::now();
+    const int k = std::min(kRefineStepIterations, remaining);
+    // One thread or all: whichever the last steps found cheaper (the same
+    // result either way).
+    const int step_threads = measured && settings_.adaptive_refine_threads
+                                 ? refine_threads_.choose()
+                                 : threads_;
+    // What the step will take: the last step's time, or more if its thread
+    // count was measured to cost more.
+    const double expected_seconds =
+        measured ? std::max(step_seconds,
+                            refine_threads_.cost(step_threads) * k * count)
+                 : step_seconds;
+    if (!deadline_.allowsStep(step_start, expected_seconds)) {
+      report.budget_exhausted = true;
+      break;
+    }
+    // Inner iterations, then the candidate n / |n| at the active pixels and
+    // its local terms of E.
+    InnerParams step_params = params;
+    step_params.num_threads = step_threads;
+    if (!backend_->runRefinement(level, step_params, state_, refine_, k)) {
+      cancelled_ = true;
+      break;
+    }
+    remaining -= k;
+    report.refine_iterations += k;
+    if (step_threads < threads_) report.refine_single_thread_iterations += k;
+    const double e =
+        backend_->candidateEnergy(level, terms, state_, refine_, step_threads);
+    const bool accepted = e <= best;
+    const double decrease = (best - e) / std::max(best, 1e-30);
+    if (accepted) {
+      best = e;
+      backend_->acceptCandidate(state_, refine_);
+    } else {
+      backend_->rejectCandidate(state_, refine_);
+    }
+    // Converged: a small decrease, once at least half of the iterations ran
+    // (the first steps after the fill can be slow to start: a short step
+    // with little decrease is no sign of convergence there).
+    if (accepted && decrease < settings_.relative_tolerance &&
+        2 * report.refine_iterations >= settings_.warm_refine_iterations) {
+      break;
+    }
+    step_seconds = secondsSince(step_start);
+    if (measured && count > 0) {
+      refine_threads_.record(step_threads,
+                             step_seconds / (static_cast<double>(k) * count));
+    }
+  }
+  backend_->endRefinement(state_, refine_, threads_);
+}
+
+}  // namespace normal_fusion
