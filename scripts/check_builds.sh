@@ -66,11 +66,11 @@ for entry in "${builds[@]}"; do
   fi
   logs=("$ws/build.log")
   if [[ "$unit_test_builds" == *" $name "* ]]; then
-    # The ROS-free unit tests: one gtest per test/unit/test_*.cpp that this
-    # configuration builds.
+    # The ROS-free unit tests: one gtest per test/{core,io,tools,eval}/test_*.cpp
+    # that this configuration builds.
     targets="$(make -C "$ws/build" help | sed -n 's/^\.\.\. \([^ ]*\).*/\1/p')"
     units=()
-    for source in "$repo"/test/unit/test_*.cpp; do
+    for source in "$repo"/test/{core,io,tools,eval}/test_*.cpp; do
       unit="$(basename "$source" .cpp)"
       if grep -qx "$unit" <<<"$targets"; then units+=("$unit"); fi
     done

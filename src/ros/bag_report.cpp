@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/io.h"
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/ros/conversions.h"
 
@@ -85,10 +86,8 @@ cv::Mat picture(const nf::NormalMap& normals, int width, int height) {
       cv::Vec3b& p = rgb.at<cv::Vec3b>(y, x);
       const bool ok = nf::isValidNormal(n[0], n[1], n[2]);
       for (int c = 0; c < 3; ++c) {
-        // c = (n + 1) / 2 * 255, x -> R, y -> G, z -> B (stored as BGR).
-        p[2 - c] = ok ? static_cast<std::uint8_t>(std::lround(std::min(
-                            std::max((n[c] + 1.0f) * 127.5f, 0.0f), 255.0f)))
-                      : 0;
+        // The library's colour code, x -> R, y -> G, z -> B (stored as BGR).
+        p[2 - c] = ok ? nf::io::colorCodeByte(n[c]) : 0;
       }
     }
   }

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/io.h"
 
 namespace normal_fusion {
 namespace node {
@@ -613,11 +614,8 @@ void normalsToVisMessage(const NormalMap& normals,
     const bool ok = isValidNormal(x, y, z);
     const float v[3] = {x, y, z};
     for (int c = 0; c < 3; ++c) {
-      // c = (n + 1) / 2 * 255, rounded; black where missing.
-      const float code = (v[c] + 1.0f) * 127.5f;
-      msg.data[3 * i + c] = ok ? static_cast<std::uint8_t>(std::lround(
-                                     std::min(std::max(code, 0.0f), 255.0f)))
-                               : 0;
+      // The library's colour code; black where missing.
+      msg.data[3 * i + c] = ok ? io::colorCodeByte(v[c]) : 0;
     }
   }
 }

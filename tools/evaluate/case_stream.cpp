@@ -3,13 +3,16 @@
 // averaged over time.
 #include <algorithm>
 #include <array>
+#include <chrono>
+#include <cstdint>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "eval/plot.h"
 #include "evaluate/evaluate.h"
-#include "normal_fusion/warp.h"
+#include "normal_fusion/stream_fuser.h"
 
 namespace evaluate {
 
@@ -25,9 +28,10 @@ const std::array<const char*, 4> kStreamMethods{{
 }};
 
 /// Solves a sequence four ways (kStreamMethods) and scores every frame on the
-/// pixels with ground truth. The warm-started streams warp their state by
-/// the camera's rotation (warpStateByRotation, as the node does with tf);
-/// the averages are carried by the same rotation (TemporalAverage).
+/// pixels with ground truth. The three ways after the first run through
+/// StreamFuser, the policy the node runs: the warm start warped by the
+/// camera's rotation (as the node does with tf), the averages carried by the
+/// same rotation, the stream's reset rules; frames are stamped at 30 fps.
 StreamResult runStream(const std::string& title, const std::string& tag,
                        const std::vector<StreamFrame>& frames,
                        const Options& options) {
@@ -36,31 +40,36 @@ StreamResult runStream(const std::string& title, const std::string& tag,
   result.tag = tag;
   result.scores.resize(kStreamMethods.size());
   nf::Solver solver(options.settings);
-  nf::TemporalAverage average;
-  nf::SolverState plain_state, averaged_state;
+  std::vector<std::unique_ptr<nf::StreamFuser>> fusers;
+  for (int m = 1; m < 4; ++m) {
+    nf::StreamSettings stream;
+    stream.solver = options.settings;
+    stream.warm_start = m >= 2;
+    if (m % 2 == 1) stream.temporal = options.temporal;
+    fusers.push_back(std::make_unique<nf::StreamFuser>(stream, title));
+  }
   Timer timer;
   for (std::size_t k = 0; k < frames.size(); ++k) {
     const StreamFrame& frame = frames[k];
-    nf::FusionProblem averaged = frame.problem;
-    average.apply(averaged.inputs, averaged.K,
-                  k > 0 ? &frame.R_cur_prev : nullptr, options.temporal,
-                  options.settings.num_threads);
-    nf::ScalarMap all(frame.gt.width(), frame.gt.height(), 1, 1.0f);
-    const nf::FusionProblem* problems[2] = {&frame.problem, &averaged};
-    for (int m = 0; m < 4; ++m) {
-      const nf::FusionProblem& problem = *problems[m % 2];
-      nf::NormalMap solved;
-      if (m < 2) {
-        solved = timed(&timer, [&] { return solver.solve(problem); });
-      } else {
-        nf::SolverState& state = m == 2 ? plain_state : averaged_state;
-        if (k > 0) {
-          nf::warpStateByRotation(state, problem.K, frame.R_cur_prev);
-        }
-        timed(&timer, [&] { return solver.solve(problem, state, k > 0); });
-        solved = state.normals;
-      }
-      result.scores[m].push_back(scoreOn(solved, frame.gt, all));
+    const nf::ScalarMap all(frame.gt.width(), frame.gt.height(), 1, 1.0f);
+    const nf::NormalMap alone =
+        timed(&timer, [&] { return solver.solve(frame.problem); });
+    result.scores[0].push_back(scoreOn(alone, frame.gt, all));
+    const nf::FrameRotation rotation =
+        k == 0 ? nf::FrameRotation::still()
+               : nf::FrameRotation::known(frame.R_cur_prev);
+    const std::int64_t stamp_ns =
+        static_cast<std::int64_t>(k) * 1000000000 / 30;
+    for (int m = 1; m < 4; ++m) {
+      nf::StreamFuser& fuser = *fusers[m - 1];
+      nf::FusionProblem problem = frame.problem;  // averaged in place
+      nf::StreamResult fused;
+      timed(&timer, [&] {
+        fuser.fuse(stamp_ns, problem, rotation,
+                   std::chrono::steady_clock::now(), &fused);
+        return fuser.endFrame(0.0);
+      });
+      result.scores[m].push_back(scoreOn(fuser.fusedNormals(), frame.gt, all));
     }
     std::cerr << "evaluate: " << title << ", frame " << k << " done\n";
   }

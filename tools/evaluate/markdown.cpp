@@ -170,9 +170,10 @@ std::string streamsText(const Options& options, const Results& r) {
           "the inputs averaged over time\n\n"
        << "Consecutive frames of a moving camera with new noise in every "
           "frame, solved with the regularizer's settings above: each frame "
-          "alone (a cold start), or as a stream (warm-started from the "
-          "previous frame's result warped by the camera's rotation, as the "
-          "node does with tf; no time budget), each on the frame's own inputs "
+          "alone (a cold start), or as a stream through StreamFuser, the "
+          "node's stream policy (warm-started from the previous frame's "
+          "result warped by the camera's rotation, as the node does with tf; "
+          "no time budget), each on the frame's own inputs "
           "or on its inputs averaged over time (TemporalAverage: "
        << options.temporal.frames << " frames, gate "
        << fixed(options.temporal.gate_degrees, 0)

@@ -8,23 +8,16 @@
 #include <string>
 
 #include "normal_fusion/errors.h"
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
 namespace internal {
 
-/// Throws InputError ("<who>: R is not a rotation matrix") unless R R^T = I
-/// (within 1e-4) with finite entries.
+/// Throws InputError ("<who>: R is not a rotation matrix ...") unless R is a
+/// rotation (geometry.h's isRotation, the one check of the library).
 inline void checkRotation(const std::array<double, 9>& R, const char* who) {
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      double d = 0.0;
-      for (int k = 0; k < 3; ++k) d += R[3 * i + k] * R[3 * j + k];
-      if (!std::isfinite(d) || std::abs(d - (i == j ? 1.0 : 0.0)) > 1e-4) {
-        throw InputError(std::string(who) + ": R is not a rotation matrix");
-      }
-    }
-  }
+  if (!isRotation(R)) throw InputError(notRotationMessage(who));
 }
 
 /// Where a current pixel comes from in the previous image: u_prev ~ K R^T
