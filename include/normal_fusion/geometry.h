@@ -6,6 +6,8 @@
 #include <cmath>
 #include <string>
 
+#include "normal_fusion/errors.h"
+
 namespace normal_fusion {
 
 /// Row-major 3x3 matrix: entry (r, c) at [3 r + c].
@@ -14,11 +16,12 @@ using Vec3 = std::array<double, 3>;
 
 constexpr Mat3 kIdentity3{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
 
-/// A camera's pose: world point X maps to camera point
-/// R_cam_world X + t_cam_world.
+/// The library's one pose type, a rigid transform: a point X of frame B maps
+/// to R X + t in frame A (t in metres); a variable's name says the frames,
+/// e.g. T_cam_world (world point to camera point) or T_rgb_depth.
 struct Pose {
-  Mat3 R_cam_world = kIdentity3;
-  Vec3 t_cam_world{{0, 0, 0}};
+  Mat3 R = kIdentity3;
+  Vec3 t{{0, 0, 0}};
 };
 
 inline double dot(const Vec3& a, const Vec3& b) {
@@ -59,21 +62,21 @@ inline Vec3 multiplyTransposed(const Mat3& M, const Vec3& v) {
            M[2] * v[0] + M[5] * v[1] + M[8] * v[2]}};
 }
 
-/// The pose applied to a point: R_cam_world X + t_cam_world.
+/// The pose applied to a point: R X + t.
 inline Vec3 transformPoint(const Pose& T, const Vec3& X) {
-  const Vec3 RX = multiply(T.R_cam_world, X);
-  return {{RX[0] + T.t_cam_world[0], RX[1] + T.t_cam_world[1],
-           RX[2] + T.t_cam_world[2]}};
+  const Vec3 RX = multiply(T.R, X);
+  return {{RX[0] + T.t[0], RX[1] + T.t[1],
+           RX[2] + T.t[2]}};
 }
 
 /// The inverse pose: R^T and -R^T t.
 inline Pose inverse(const Pose& T) {
   Pose inv;
-  inv.R_cam_world = transpose(T.R_cam_world);
+  inv.R = transpose(T.R);
   for (int r = 0; r < 3; ++r) {
-    inv.t_cam_world[r] = 0.0;
+    inv.t[r] = 0.0;
     for (int k = 0; k < 3; ++k) {
-      inv.t_cam_world[r] -= inv.R_cam_world[3 * r + k] * T.t_cam_world[k];
+      inv.t[r] -= inv.R[3 * r + k] * T.t[k];
     }
   }
   return inv;
@@ -124,6 +127,17 @@ inline std::string notRotationMessage(const std::string& who) {
   return who +
          ": R is not a rotation matrix (expected R R^T = I within 1e-4 and "
          "det R = +1)";
+}
+
+/// Throws ParameterError naming `who` unless T's entries are finite and T.R
+/// is a rotation (isRotation).
+inline void validatePose(const Pose& T, const std::string& who) {
+  for (double v : T.t) {
+    if (!std::isfinite(v)) {
+      throw ParameterError(who + ": t has a non-finite entry");
+    }
+  }
+  if (!isRotation(T.R)) throw ParameterError(notRotationMessage(who));
 }
 
 }  // namespace normal_fusion

@@ -32,20 +32,15 @@
 #include <string>
 #include <vector>
 
+#include "normal_fusion/geometry.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
 namespace depth {
 
-/// A rigid transform p_b = R p_a + t; R row-major, t in metres.
-struct RigidTransform {
-  std::array<double, 9> R{{1, 0, 0, 0, 1, 0, 0, 0, 1}};
-  std::array<double, 3> t{{0, 0, 0}};
-
-  /// Throws ParameterError unless every value is finite and R is a rotation
-  /// (R R^T = I and det R = 1, within 1e-6).
-  void validate() const;
-};
+/// The transform between the cameras: the library's one pose type
+/// (geometry.h), p_rgb = R p_depth + t, R row-major, t in metres.
+using RigidTransform = Pose;
 
 /// How a projected depth pixel covers the colour image (header comment).
 enum class Splat {

@@ -51,37 +51,6 @@ Point transformPixel(double ray_x, double ray_y, float z,
 
 }  // namespace
 
-void RigidTransform::validate() const {
-  for (double v : R) {
-    if (!std::isfinite(v)) {
-      throw ParameterError("rigid transform: R has a non-finite entry");
-    }
-  }
-  for (double v : t) {
-    if (!std::isfinite(v)) {
-      throw ParameterError("rigid transform: t has a non-finite entry");
-    }
-  }
-  // R R^T = I (rows orthonormal) and det R = +1 (no reflection).
-  constexpr double kTolerance = 1e-6;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      double dot = 0.0;
-      for (int k = 0; k < 3; ++k) dot += R[3 * i + k] * R[3 * j + k];
-      if (std::abs(dot - (i == j ? 1.0 : 0.0)) > kTolerance) {
-        throw ParameterError(
-            "rigid transform: R is not orthonormal (R R^T != I)");
-      }
-    }
-  }
-  const double det = R[0] * (R[4] * R[8] - R[5] * R[7]) -
-                     R[1] * (R[3] * R[8] - R[5] * R[6]) +
-                     R[2] * (R[3] * R[7] - R[4] * R[6]);
-  if (std::abs(det - 1.0) > kTolerance) {
-    throw ParameterError("rigid transform: det R is not 1 (a reflection)");
-  }
-}
-
 Splat splatFromString(const std::string& name) {
   if (name == "nearest") return Splat::kNearest;
   if (name == "2x2") return Splat::k2x2;
@@ -124,7 +93,7 @@ void DepthRegistration::check(const ScalarMap& depth_m,
   }
   checkPinhole(K_depth, "K_depth");
   checkPinhole(rgb.K, "K_rgb");
-  T_rgb_depth.validate();
+  validatePose(T_rgb_depth, "rigid transform");
 }
 
 void DepthRegistration::registerNormals(

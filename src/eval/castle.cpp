@@ -330,10 +330,10 @@ synthetic::Pose readPose(const std::string& path) {
   }
   synthetic::Pose pose;
   for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) pose.R_cam_world[3 * r + c] = m[4 * r + c];
-    pose.t_cam_world[r] = m[4 * r + 3];
+    for (int c = 0; c < 3; ++c) pose.R[3 * r + c] = m[4 * r + c];
+    pose.t[r] = m[4 * r + 3];
   }
-  if (!isRotation(pose.R_cam_world)) {
+  if (!isRotation(pose.R)) {
     throw InputError(notRotationMessage("castle: '" + path + "'"));
   }
   return pose;
@@ -383,7 +383,7 @@ Frame loadFrame(const std::string& dir, int number,
 
   // Depth camera pose: d_M_o = d_M_c c_M_o, d_M_c a translation along x.
   synthetic::Pose T_depth_obj = T_color_obj;
-  T_depth_obj.t_cam_world[0] += kDepthFromColorXM;
+  T_depth_obj.t[0] += kDepthFromColorXM;
 
   // Model depth and normals; ground truth where the model explains the depth.
   ScalarMap model_depth;

@@ -309,8 +309,8 @@ std::vector<Face> readCaoFaces(const std::string& path,
 synthetic::Pose cubeToObject() {
   // x' = -x - 0.2, y' = z + 0.12, z' = y - 0.15 (ViSP testGenericTracker).
   synthetic::Pose T;
-  T.R_cam_world = {{-1, 0, 0, 0, 0, 1, 0, 1, 0}};
-  T.t_cam_world = {{-0.2, 0.12, -0.15}};
+  T.R = {{-1, 0, 0, 0, 0, 1, 0, 1, 0}};
+  T.t = {{-0.2, 0.12, -0.15}};
   return T;
 }
 

@@ -289,10 +289,10 @@ std::array<double, 9> rotationFromYawPitch(double yaw, double pitch) {
 Pose poseFromCentre(const std::array<double, 9>& R_cam_world,
                     const Vec3& centre_world) {
   Pose pose;
-  pose.R_cam_world = R_cam_world;
+  pose.R = R_cam_world;
   // t = -R C maps the camera centre to the camera origin.
   const Vec3 t = scale(multiply(R_cam_world, centre_world), -1.0);
-  pose.t_cam_world = {{t[0], t[1], t[2]}};
+  pose.t = {{t[0], t[1], t[2]}};
   return pose;
 }
 
@@ -479,9 +479,9 @@ double irradiance(const Lighting& light, const Vec3& p, const Vec3& n) {
 }
 
 void requireRotation(const Pose& pose) {
-  const auto& R = pose.R_cam_world;
+  const auto& R = pose.R;
   for (double r : R) requireFinite("pose rotation entry", r);
-  for (double t : pose.t_cam_world) requireFinite("pose translation entry", t);
+  for (double t : pose.t) requireFinite("pose translation entry", t);
   if (!isRotation(R)) throw ParameterError(notRotationMessage("pose"));
 }
 
@@ -489,9 +489,9 @@ Frame renderPrepared(const Scene& scene, int width, int height,
                      const Pose& pose) {
   requireSize(width, height);
   requireRotation(pose);
-  const auto& R = pose.R_cam_world;
+  const auto& R = pose.R;
   // Camera centre in the world: C = -R^T t.
-  const Vec3 t{{pose.t_cam_world[0], pose.t_cam_world[1], pose.t_cam_world[2]}};
+  const Vec3 t{{pose.t[0], pose.t[1], pose.t[2]}};
   const Vec3 centre = scale(multiplyTransposed(R, t), -1.0);
   for (int a = 0; a < 3; ++a) {
     if (!(centre[a] > scene.room.lo[a] && centre[a] < scene.room.hi[a])) {

@@ -15,7 +15,7 @@
 namespace normal_fusion {
 namespace synthetic {
 
-/// Camera pose: world point X maps to camera point R_cam_world X + t_cam_world.
+/// Camera pose (T_cam_world): world point X maps to camera point R X + t.
 using Pose = normal_fusion::Pose;
 
 /// Rotation of the camera from `prev` to `cur`: R_cur_prev = R_cur_world

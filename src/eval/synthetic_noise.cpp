@@ -170,7 +170,7 @@ NormalMap sparseAccurate(const NormalMap& normals_gt, double density,
 }
 
 Mat3 relativeRotation(const Pose& cur, const Pose& prev) {
-  return multiply(cur.R_cam_world, transpose(prev.R_cam_world));
+  return multiply(cur.R, transpose(prev.R));
 }
 
 }  // namespace synthetic

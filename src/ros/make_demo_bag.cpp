@@ -180,8 +180,8 @@ int castel(const std::string& dir, const std::string& output, int frames) {
   // color_M_depth = depth_M_color^-1.
   const nf::Pose T_c_d =
       nf::inverse(nf::castle::readPose(dir + "/depth_M_color.txt"));
-  const std::array<double, 9>& R_c_d = T_c_d.R_cam_world;
-  const std::array<double, 3>& t_c_d = T_c_d.t_cam_world;
+  const std::array<double, 9>& R_c_d = T_c_d.R;
+  const std::array<double, 3>& t_c_d = T_c_d.t;
   Writer writer;
   writer.bag.open(output, rosbag::bagmode::Write);
   int written = 0;

@@ -87,10 +87,10 @@ TEST_F(CastleLoaderTest, PoseIsReadRowMajorAndCheckedForRotation) {
   // A rotation of 90 degrees about z and a translation.
   writeText("pose.txt", "0 -1 0 0.1\n1 0 0 0.2\n0 0 1 0.3\n0 0 0 1\n");
   const synthetic::Pose pose = castle::readPose(path("pose.txt"));
-  EXPECT_DOUBLE_EQ(pose.R_cam_world[1], -1.0);
-  EXPECT_DOUBLE_EQ(pose.R_cam_world[3], 1.0);
-  EXPECT_DOUBLE_EQ(pose.t_cam_world[0], 0.1);
-  EXPECT_DOUBLE_EQ(pose.t_cam_world[2], 0.3);
+  EXPECT_DOUBLE_EQ(pose.R[1], -1.0);
+  EXPECT_DOUBLE_EQ(pose.R[3], 1.0);
+  EXPECT_DOUBLE_EQ(pose.t[0], 0.1);
+  EXPECT_DOUBLE_EQ(pose.t[2], 0.3);
   writeText("scaled.txt", "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n");
   EXPECT_THROW(castle::readPose(path("scaled.txt")), InputError);
   writeText("short.txt", "1 0 0 0\n0 1 0 0\n");
@@ -121,7 +121,7 @@ TEST_F(CastleLoaderTest, CaoFacesFollowLoadAndTheTransform) {
             "V1\nload(\"parts/square.cao\")\n3\n0 0 1\n1 0 1\n0 1 1\n"
             "1\n0 1\n0\n2\n3 0 1 2\n3 0 0 1\n0\n0\n");
   synthetic::Pose shift;
-  shift.t_cam_world = {{10, 0, 0}};
+  shift.t = {{10, 0, 0}};
   const std::vector<castle::Face> faces =
       castle::readCaoFaces(path("main.cao"), shift);
   // The square of the loaded file, the triangle; the degenerate face dropped.
@@ -244,7 +244,7 @@ TEST(CastleSequence, ModelWithTheDepthCameraPoseExplainsTheDepthMap) {
     const CameraIntrinsics K =
         castle::readIntrinsics(dir + "/Config/chateau_depth.xml");
     synthetic::Pose T_depth_obj = T_color_obj;
-    T_depth_obj.t_cam_world[0] += castle::kDepthFromColorXM;
+    T_depth_obj.t[0] += castle::kDepthFromColorXM;
     // With the 5 cm offset the model explains nearly every depth pixel;
     // from the colour camera's own pose it does not.
     EXPECT_GT(modelAgreement(faces, T_depth_obj, K, depth), 0.95)

@@ -57,7 +57,7 @@ Vec3 backProject(const Frame& frame, int y, int x) {
 
 /// World-frame normal R^T n_cam.
 Vec3 toWorld(const synthetic::Pose& pose, const Vec3& n_cam) {
-  const auto& R = pose.R_cam_world;
+  const auto& R = pose.R;
   return {R[0] * n_cam[0] + R[3] * n_cam[1] + R[6] * n_cam[2],
           R[1] * n_cam[0] + R[4] * n_cam[1] + R[7] * n_cam[2],
           R[2] * n_cam[0] + R[5] * n_cam[1] + R[8] * n_cam[2]};
@@ -285,10 +285,10 @@ TEST(Synthetic, RejectsBadArguments) {
                ParameterError);
   EXPECT_THROW(synthetic::renderScene(0, 0, 24), ParameterError);
   synthetic::Pose outside;  // identity pose: camera centre at the world origin,
-  outside.t_cam_world = {{0.0, 0.0, 100.0}};  // moved 100 m away
+  outside.t = {{0.0, 0.0, 100.0}};  // moved 100 m away
   EXPECT_THROW(synthetic::renderScene(0, 32, 24, outside), ParameterError);
   synthetic::Pose skewed = synthetic::defaultPose(0);
-  for (int i = 0; i < 3; ++i) skewed.R_cam_world[i] *= 1.5;
+  for (int i = 0; i < 3; ++i) skewed.R[i] *= 1.5;
   EXPECT_THROW(synthetic::renderScene(0, 32, 24, skewed), ParameterError);
   EXPECT_THROW(synthetic::renderSequence(0, 32, 24, 0), ParameterError);
   EXPECT_THROW(synthetic::renderSequence(0, 32, 24, 2, 0.3, 0.0),
@@ -539,13 +539,13 @@ TEST(Synthetic, SequenceMovesSlowlyAndConsistently) {
   ASSERT_EQ(frames.size(), static_cast<std::size_t>(kFrames));
   const synthetic::Pose start = synthetic::defaultPose(0);
   for (int i = 0; i < 9; ++i) {
-    EXPECT_DOUBLE_EQ(frames[0].pose.R_cam_world[i], start.R_cam_world[i]);
+    EXPECT_DOUBLE_EQ(frames[0].pose.R[i], start.R[i]);
   }
   for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(frames[0].pose.t_cam_world[i], start.t_cam_world[i], 1e-12);
+    EXPECT_NEAR(frames[0].pose.t[i], start.t[i], 1e-12);
   }
   const auto centre = [](const synthetic::Pose& pose) {
-    const Vec3 t{pose.t_cam_world[0], pose.t_cam_world[1], pose.t_cam_world[2]};
+    const Vec3 t{pose.t[0], pose.t[1], pose.t[2]};
     return Vec3{-toWorld(pose, t)[0], -toWorld(pose, t)[1],
                 -toWorld(pose, t)[2]};
   };
@@ -555,8 +555,8 @@ TEST(Synthetic, SequenceMovesSlowlyAndConsistently) {
     EXPECT_NEAR(b.stamp - a.stamp, 1.0 / fps, 1e-12);
     EXPECT_NEAR(a.stamp, k / fps, 1e-12);
     // Relative rotation R_b R_a^T: angle from its trace.
-    const auto& Ra = a.pose.R_cam_world;
-    const auto& Rb = b.pose.R_cam_world;
+    const auto& Ra = a.pose.R;
+    const auto& Rb = b.pose.R;
     double trace = 0.0;
     for (int i = 0; i < 3; ++i) {
       for (int j = 0; j < 3; ++j) trace += Rb[3 * i + j] * Ra[3 * i + j];
@@ -578,12 +578,12 @@ TEST(Synthetic, SequenceMovesSlowlyAndConsistently) {
         if (!planarInterior(a, y, x)) continue;
         const Vec3 p_a = backProject(a, y, x);
         // World point X = R_a^T (p_a - t_a); camera b: p_b = R_b X + t_b.
-        const Vec3 rel{p_a[0] - a.pose.t_cam_world[0],
-                       p_a[1] - a.pose.t_cam_world[1],
-                       p_a[2] - a.pose.t_cam_world[2]};
+        const Vec3 rel{p_a[0] - a.pose.t[0],
+                       p_a[1] - a.pose.t[1],
+                       p_a[2] - a.pose.t[2]};
         const Vec3 X = toWorld(a.pose, rel);
-        Vec3 p_b{b.pose.t_cam_world[0], b.pose.t_cam_world[1],
-                 b.pose.t_cam_world[2]};
+        Vec3 p_b{b.pose.t[0], b.pose.t[1],
+                 b.pose.t[2]};
         for (int i = 0; i < 3; ++i) {
           for (int j = 0; j < 3; ++j) p_b[i] += Rb[3 * i + j] * X[j];
         }

@@ -122,7 +122,7 @@ inline NoisyFrame noisyFrame(const synthetic::Frame& frame,
 /// translation -R^T t.
 inline geometry_msgs::TransformStamped cameraInWorld(
     const synthetic::Pose& pose, double stamp) {
-  const auto& R = pose.R_cam_world;
+  const auto& R = pose.R;
   tf2::Matrix3x3 Rt(R[0], R[3], R[6], R[1], R[4], R[7], R[2], R[5], R[8]);
   tf2::Quaternion q;
   Rt.getRotation(q);
@@ -134,7 +134,7 @@ inline geometry_msgs::TransformStamped cameraInWorld(
   t.transform.rotation.y = q.y();
   t.transform.rotation.z = q.z();
   t.transform.rotation.w = q.w();
-  const auto& tr = pose.t_cam_world;
+  const auto& tr = pose.t;
   t.transform.translation.x = -(R[0] * tr[0] + R[3] * tr[1] + R[6] * tr[2]);
   t.transform.translation.y = -(R[1] * tr[0] + R[4] * tr[1] + R[7] * tr[2]);
   t.transform.translation.z = -(R[2] * tr[0] + R[5] * tr[1] + R[8] * tr[2]);
