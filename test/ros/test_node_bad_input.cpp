@@ -42,6 +42,7 @@ struct BadInputCase {
   std::vector<std::string> logged;
 };
 
+// Over 80 lines: a table, one entry per case.
 std::vector<BadInputCase> badInputCases() {
   using Messages = NodeClient::FrameMessages;
   const nf::test::NoisyFrame& f = sceneFrame();
@@ -277,6 +278,7 @@ TEST(Node, FarStampsAndTimeGoingBackAreFused) {
 /// A seeded fuzz: a few hundred messages spoiled at random (encodings,
 /// sizes, steps, bytes, stamps, K) on every input topic, with a good frame
 /// after every tenth; the node answers each good frame and the last one.
+// Over 80 lines: one seeded sequence, whose messages depend on every draw.
 TEST(Node, SurvivesSeededFuzz) {
   if (compareMode()) GTEST_SKIP();
   NodeClient client("");

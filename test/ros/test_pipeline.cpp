@@ -288,6 +288,7 @@ TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
 /// sets averaged give a better map than the same stream without; the
 /// averages follow the stream (restart on a gap, and on an unknown rotation,
 /// with a warning that says so) and run with warm starts off too.
+// Over 80 lines: one stream's history, checked in the order it happens.
 TEST(Pipeline, TemporalAveragingFollowsTheStream) {
   const synthetic::Frame frame = synthetic::renderScene(0, 96, 72);
   SceneFixture plain_fixture, averaged_fixture;
