@@ -15,6 +15,7 @@
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
+#include "normal_fusion/ros/pipeline.h"
 #include "ros_test_util.h"
 
 namespace normal_fusion {
