@@ -1,0 +1,115 @@
+// The solver's time budgets: the best iterate when time runs out, the frame
+// budget counted from the frame's start, and a stream's cold start under its
+// own budget.
+#include <gtest/gtest.h>
+
+#include <chrono>
+
+#include "normal_fusion/solver.h"
+#include "solver_test_util.h"
+
+namespace normal_fusion {
+namespace {
+
+using test::expectUnit;
+using test::noisyTwoPlanes;
+
+TEST(Solver, TimeBudgetReturnsTheBestIterateSoFar) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(320, 240, 0.5, &gt);
+  SolverSettings settings;
+  settings.time_budget_ms = 1.0;
+  settings.max_total_inner_iterations = 100000;
+  Solver solver(settings);
+  SolveReport report;
+  const NormalMap fused = solver.solve(problem, &report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 100000);
+  expectUnit(fused);
+  EXPECT_LE(report.final_energy, report.initial_energy);
+}
+
+/// 200 inner iterations (steps of 10, no tolerance stop) under a frame
+/// budget of 2 s: a budget that only a frame begun long ago runs out of.
+SolverSettings twoHundredIterationsUnderABudget() {
+  SolverSettings settings;
+  settings.time_budget_ms = 2000.0;
+  settings.inner_iterations = 10;
+  settings.max_total_inner_iterations = 200;
+  settings.relative_tolerance = 0.0;
+  return settings;
+}
+
+/// The next solve's frame began 10 s ago: its budget is spent before the
+/// solve starts.
+void spendTheFrameBudget(Solver& solver) {
+  solver.setBudgetStart(std::chrono::steady_clock::now() -
+                        std::chrono::seconds(10));
+}
+
+/// setBudgetStart(): the budget counts from the given time (work before the
+/// solve is inside it), for one solve only.
+TEST(Solver, TimeBudgetCountsFromTheFrameStart) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  Solver solver(twoHundredIterationsUnderABudget());
+  SolverState state;
+  SolveReport report;
+  spendTheFrameBudget(solver);
+  solver.solve(problem, state, false, report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 200);
+  expectUnit(state.normals);
+  // The next solve counts from its own start again: all 200 iterations.
+  solver.solve(problem, state, false, report);
+  EXPECT_FALSE(report.budget_exhausted);
+  EXPECT_EQ(report.inner_iterations, 200);
+}
+
+/// A stream's cold start (a warm start asked for, no usable state) runs
+/// under cold_start_budget_ms (0 = none), not under the frame budget; a
+/// one-shot cold solve and a warm frame keep the frame budget. Each frame's
+/// budget is spent before the solve starts (setBudgetStart 10 s back), so
+/// only the rule decides whether it stops early.
+TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings = twoHundredIterationsUnderABudget();
+  Solver solver(settings);
+  SolveReport report;
+  auto spent_frame = [&] { spendTheFrameBudget(solver); };
+  // One-shot cold solve: the frame budget.
+  SolverState one_shot;
+  spent_frame();
+  solver.solve(problem, one_shot, false, report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_FALSE(report.cold_start_budget_used);
+  EXPECT_LT(report.inner_iterations, 200);
+  // A stream's cold start: no budget by default, all 200 iterations.
+  SolverState stream;
+  spent_frame();
+  solver.solve(problem, stream, true, report);
+  EXPECT_FALSE(report.warm_started);
+  EXPECT_TRUE(report.cold_start_budget_used);
+  EXPECT_FALSE(report.budget_exhausted);
+  EXPECT_EQ(report.inner_iterations, 200);
+  // The next (warm) frame: the frame budget again.
+  spent_frame();
+  solver.solve(problem, stream, true, report);
+  EXPECT_TRUE(report.warm_started);
+  EXPECT_FALSE(report.cold_start_budget_used);
+  EXPECT_TRUE(report.budget_exhausted);
+  // A cold-start budget of its own (spent too): it stops early.
+  settings.cold_start_budget_ms = 2000.0;
+  solver.setSettings(settings);
+  SolverState restart;
+  spent_frame();
+  solver.solve(problem, restart, true, report);
+  EXPECT_TRUE(report.cold_start_budget_used);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_LT(report.inner_iterations, 200);
+  expectUnit(restart.normals);
+}
+
+}  // namespace
+}  // namespace normal_fusion
