@@ -245,8 +245,8 @@ TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
   PipelineOutput out;
   int calls = 0;
   // R_cur_prev from the sequence's exact poses.
-  const auto& P0 = frames[0].pose.R_cam_world;
-  const auto& P1 = frames[1].pose.R_cam_world;
+  const auto& P0 = frames[0].pose.R;
+  const auto& P1 = frames[1].pose.R;
   RotationLookup lookup = [&](const std::string& frame, const ros::Time& prev,
                               const ros::Time& cur, std::array<double, 9>* R,
                               std::string*) {
@@ -389,8 +389,8 @@ TEST(Pipeline, RotationLookupInATfBufferGivesTheCameraRotation) {
   ASSERT_TRUE(lookup("camera", ros::Time(3.0), ros::Time(3.1), &R, &reason))
       << reason;
   // Expected R_cur_prev = R_cam1_world R_cam0_world^T.
-  const auto& P0 = frames[0].pose.R_cam_world;
-  const auto& P1 = frames[1].pose.R_cam_world;
+  const auto& P0 = frames[0].pose.R;
+  const auto& P1 = frames[1].pose.R;
   double largest_entry_of_difference = 0.0, rotation_angle = 0.0;
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
