@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
@@ -96,14 +97,9 @@ void resampleNormalsBilinear(const PlanarImage& source, double sx, double sy,
   }
 }
 
-}  // namespace
-
-void resampleMap(const PlanarImage& source, int width, int height,
-                 Resampling method, bool is_normal_map,
-                 const std::string& topic, PlanarImage& target, int threads,
-                 PlanarImage* scratch) {
-  const int w = source.width(), h = source.height(), C = source.channels();
-  // Same aspect ratio: (width / w) / (height / h) within 1 %.
+/// Same aspect ratio: (width / w) / (height / h) within 1 %.
+void checkSameAspect(int w, int h, int width, int height,
+                     const std::string& topic) {
   const double ratio =
       (static_cast<double>(width) * h) / (static_cast<double>(height) * w);
   if (std::abs(ratio - 1.0) > 0.01) {
@@ -112,6 +108,16 @@ void resampleMap(const PlanarImage& source, int width, int height,
                      sizeText(width, height) +
                      ": expected the same aspect ratio");
   }
+}
+
+}  // namespace
+
+void resampleMap(const PlanarImage& source, int width, int height,
+                 Resampling method, bool is_normal_map,
+                 const std::string& topic, PlanarImage& target, int threads,
+                 PlanarImage* scratch) {
+  const int w = source.width(), h = source.height(), C = source.channels();
+  checkSameAspect(w, h, width, height, topic);
   target.resize(width, height, C);
   const double sx = static_cast<double>(w) / width;
   const double sy = static_cast<double>(h) / height;
