@@ -27,31 +27,38 @@ struct Schedule {
   double step_balance;
 };
 
-}  // namespace
-
-int main(int argc, char** argv) {
+struct Options {
   int width = 640, height = 480, threads = 2;
   double sigma = 0.4, tolerance = 1e-3;
+};
+
+/// Reads `--key value` pairs into `o`; false (after a message) on an unknown
+/// key.
+bool parseOptions(int argc, char** argv, Options& o) {
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string key = argv[i];
     const double value = std::atof(argv[i + 1]);
     if (key == "--width")
-      width = static_cast<int>(value);
+      o.width = static_cast<int>(value);
     else if (key == "--height")
-      height = static_cast<int>(value);
+      o.height = static_cast<int>(value);
     else if (key == "--threads")
-      threads = static_cast<int>(value);
+      o.threads = static_cast<int>(value);
     else if (key == "--sigma")
-      sigma = value;
+      o.sigma = value;
     else if (key == "--tolerance")
-      tolerance = value;
+      o.tolerance = value;
     else {
       std::fprintf(stderr, "bench_time_to_solution: unknown option %s\n",
                    key.c_str());
-      return 2;
+      return false;
     }
   }
-  const std::vector<Schedule> schedules = {
+  return true;
+}
+
+std::vector<Schedule> schedules() {
+  return {
       {"plain CP, 50 inner per outer", 50, false, 1, 1.0},
       {"plain CP, 10 inner per outer", 10, false, 1, 1.0},
       {"plain CP, 20 inner per outer", 20, false, 1, 1.0},
@@ -66,96 +73,135 @@ int main(int argc, char** argv) {
       {"preconditioned, 50 inner, balance 0.125", 50, true, 1, 0.125},
       {"preconditioned, 20 inner, balance 0.25", 20, true, 1, 0.25},
   };
-  // The targets: E <= E* (1 + t) for t = tolerance and tolerance / 10.
-  const std::vector<double> targets = {tolerance, tolerance / 10.0};
-  std::printf(
-      "# time to solution: %dx%d, sigma %.2f, %d threads, target E <= E* (1 + "
-      "%g)\n",
-      width, height, sigma, threads, tolerance);
-  std::printf(
-      "| scene | schedule | time to %g (ms) | inner its | time to %g (ms) | "
-      "inner its | E / E* - 1 after 4000 its |\n",
-      targets[0], targets[1]);
-  std::printf("|---:|---|---:|---:|---:|---:|---:|\n");
-  // [target][schedule]: summed time, and whether every scene reached it.
-  std::vector<std::vector<double>> total_ms(
-      targets.size(), std::vector<double>(schedules.size(), 0.0));
-  std::vector<std::vector<bool>> all_reached(
-      targets.size(), std::vector<bool>(schedules.size(), true));
-  for (int scene = 0; scene < nf::synthetic::kNumScenes; ++scene) {
-    const nf::synthetic::Frame frame =
-        nf::synthetic::renderScene(scene, width, height);
-    nf::FusionProblem problem;
-    problem.image = frame.image;
-    problem.K = frame.K;
-    nf::NormalInput input;
-    input.normals =
-        nf::synthetic::addPaperNoise(frame.normals_gt, sigma, 40 + scene);
-    problem.inputs = {input};
-    // E*: the lowest energy of long runs (4000 inner iterations) of every
-    // schedule.
-    std::vector<nf::SolveReport> reports(schedules.size());
-    double e_star = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < schedules.size(); ++i) {
-      nf::SolverSettings settings;
-      settings.num_threads = threads;
-      settings.inner_iterations = schedules[i].inner_iterations;
-      settings.preconditioning = schedules[i].preconditioning;
-      settings.pyramid_levels = schedules[i].pyramid_levels;
-      settings.step_balance = schedules[i].step_balance;
-      settings.relative_tolerance = 1e-7;
-      settings.max_total_inner_iterations = 4000;
-      settings.max_outer_iterations = 4000;
-      nf::Solver solver(settings);
-      solver.solve(problem, &reports[i]);
-      e_star = std::min(e_star, reports[i].final_energy);
-    }
-    for (std::size_t i = 0; i < schedules.size(); ++i) {
-      const nf::SolveReport& r = reports[i];
-      std::printf("| %d | %s |", scene, schedules[i].name.c_str());
-      for (std::size_t t = 0; t < targets.size(); ++t) {
-        double reached_ms = -1.0;
-        int reached_its = -1;
-        for (std::size_t k = 0; k < r.energies.size(); ++k) {
-          if (r.energies[k] <= e_star * (1.0 + targets[t])) {
-            reached_ms = 1000.0 * r.energy_seconds[k];
-            // Accepted step k closes after k outer steps of the schedule.
-            reached_its = static_cast<int>(k) * schedules[i].inner_iterations;
-            break;
-          }
-        }
-        if (reached_ms < 0) all_reached[t][i] = false;
-        total_ms[t][i] += reached_ms;
-        if (reached_ms < 0) {
-          std::printf(" not reached | - |");
-        } else {
-          std::printf(" %.0f | %d |", reached_ms, reached_its);
+}
+
+nf::FusionProblem sceneProblem(int scene, const Options& o) {
+  const nf::synthetic::Frame frame =
+      nf::synthetic::renderScene(scene, o.width, o.height);
+  nf::FusionProblem problem;
+  problem.image = frame.image;
+  problem.K = frame.K;
+  nf::NormalInput input;
+  input.normals =
+      nf::synthetic::addPaperNoise(frame.normals_gt, o.sigma, 40 + scene);
+  problem.inputs = {input};
+  return problem;
+}
+
+/// Long runs (4000 inner iterations) of every schedule; E* is the lowest
+/// energy of them.
+std::vector<nf::SolveReport> longRuns(const nf::FusionProblem& problem,
+                                      const std::vector<Schedule>& all,
+                                      int threads) {
+  std::vector<nf::SolveReport> reports(all.size());
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    nf::SolverSettings settings;
+    settings.num_threads = threads;
+    settings.inner_iterations = all[i].inner_iterations;
+    settings.preconditioning = all[i].preconditioning;
+    settings.pyramid_levels = all[i].pyramid_levels;
+    settings.step_balance = all[i].step_balance;
+    settings.relative_tolerance = 1e-7;
+    settings.max_total_inner_iterations = 4000;
+    settings.max_outer_iterations = 4000;
+    nf::Solver solver(settings);
+    solver.solve(problem, &reports[i]);
+  }
+  return reports;
+}
+
+/// Summed time to each target per schedule, and whether every scene reached
+/// it: [target][schedule].
+struct Totals {
+  std::vector<std::vector<double>> ms;
+  std::vector<std::vector<bool>> all_reached;
+};
+
+/// Prints a scene's rows and adds its times to `totals`.
+void printScene(int scene, const std::vector<Schedule>& all,
+                const std::vector<nf::SolveReport>& reports,
+                const std::vector<double>& targets, Totals& totals) {
+  double e_star = std::numeric_limits<double>::infinity();
+  for (const nf::SolveReport& r : reports) {
+    e_star = std::min(e_star, r.final_energy);
+  }
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    const nf::SolveReport& r = reports[i];
+    std::printf("| %d | %s |", scene, all[i].name.c_str());
+    for (std::size_t t = 0; t < targets.size(); ++t) {
+      double reached_ms = -1.0;
+      int reached_its = -1;
+      for (std::size_t k = 0; k < r.energies.size(); ++k) {
+        if (r.energies[k] <= e_star * (1.0 + targets[t])) {
+          reached_ms = 1000.0 * r.energy_seconds[k];
+          // Accepted step k closes after k outer steps of the schedule.
+          reached_its = static_cast<int>(k) * all[i].inner_iterations;
+          break;
         }
       }
-      std::printf(" %.2e |\n", r.final_energy / e_star - 1.0);
+      if (reached_ms < 0) totals.all_reached[t][i] = false;
+      totals.ms[t][i] += reached_ms;
+      if (reached_ms < 0) {
+        std::printf(" not reached | - |");
+      } else {
+        std::printf(" %.0f | %d |", reached_ms, reached_its);
+      }
     }
-    std::fflush(stdout);
+    std::printf(" %.2e |\n", r.final_energy / e_star - 1.0);
   }
+}
+
+void printMeans(const std::vector<Schedule>& all,
+                const std::vector<double>& targets, const Totals& totals) {
   for (std::size_t t = 0; t < targets.size(); ++t) {
     std::printf(
         "\n| schedule | mean time to within %g of E* (ms) | speed-up over "
         "plain CP |\n|---|---:|---:|\n",
         targets[t]);
-    for (std::size_t i = 0; i < schedules.size(); ++i) {
-      if (!all_reached[t][i]) {
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      if (!totals.all_reached[t][i]) {
         std::printf("| %s | not reached on every scene | - |\n",
-                    schedules[i].name.c_str());
+                    all[i].name.c_str());
         continue;
       }
-      if (!all_reached[t][0]) {
-        std::printf("| %s | %.0f | - |\n", schedules[i].name.c_str(),
-                    total_ms[t][i] / nf::synthetic::kNumScenes);
+      if (!totals.all_reached[t][0]) {
+        std::printf("| %s | %.0f | - |\n", all[i].name.c_str(),
+                    totals.ms[t][i] / nf::synthetic::kNumScenes);
         continue;
       }
-      std::printf("| %s | %.0f | %.2f |\n", schedules[i].name.c_str(),
-                  total_ms[t][i] / nf::synthetic::kNumScenes,
-                  total_ms[t][0] / total_ms[t][i]);
+      std::printf("| %s | %.0f | %.2f |\n", all[i].name.c_str(),
+                  totals.ms[t][i] / nf::synthetic::kNumScenes,
+                  totals.ms[t][0] / totals.ms[t][i]);
     }
   }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  if (!parseOptions(argc, argv, o)) return 2;
+  const std::vector<Schedule> all = schedules();
+  // The targets: E <= E* (1 + t) for t = tolerance and tolerance / 10.
+  const std::vector<double> targets = {o.tolerance, o.tolerance / 10.0};
+  std::printf(
+      "# time to solution: %dx%d, sigma %.2f, %d threads, target E <= E* (1 + "
+      "%g)\n",
+      o.width, o.height, o.sigma, o.threads, o.tolerance);
+  std::printf(
+      "| scene | schedule | time to %g (ms) | inner its | time to %g (ms) | "
+      "inner its | E / E* - 1 after 4000 its |\n",
+      targets[0], targets[1]);
+  std::printf("|---:|---|---:|---:|---:|---:|---:|\n");
+  Totals totals{std::vector<std::vector<double>>(
+                    targets.size(), std::vector<double>(all.size(), 0.0)),
+                std::vector<std::vector<bool>>(
+                    targets.size(), std::vector<bool>(all.size(), true))};
+  for (int scene = 0; scene < nf::synthetic::kNumScenes; ++scene) {
+    const nf::FusionProblem problem = sceneProblem(scene, o);
+    printScene(scene, all, longRuns(problem, all, o.threads), targets, totals);
+    std::fflush(stdout);
+  }
+  printMeans(all, targets, totals);
   return 0;
 }

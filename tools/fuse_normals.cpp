@@ -125,9 +125,80 @@ bool hasFloatExtension(const std::string& path) {
   return ext == ".exr" || ext == ".EXR" || ext == ".pfm" || ext == ".PFM";
 }
 
+/// Applies one option that takes a value; `value()` reads it (inline or the
+/// next argument).
+template <typename Value>
+void applyValueOption(const std::string& option, const Value& value,
+                      Options& options) {
+  const auto currentInput = [&]() -> InputSpec& {
+    if (options.inputs.empty()) {
+      throw UsageError(option + " must follow the --normals it applies to");
+    }
+    return options.inputs.back();
+  };
+  if (option == "--image") {
+    options.image_path = value();
+  } else if (option == "--camera-info") {
+    options.camera_info_path = value();
+  } else if (option == "--output") {
+    options.output_path = value();
+  } else if (option == "--normals") {
+    InputSpec input;
+    input.normals_path = value();
+    options.inputs.push_back(input);
+  } else if (option == "--weight") {
+    InputSpec& input = currentInput();
+    input.weight = parseDouble(option, value());
+    if (input.weight < 0.0) {
+      throw UsageError(option + ": expected a weight >= 0, got " +
+                       std::to_string(input.weight));
+    }
+  } else if (option == "--confidence") {
+    currentInput().confidence_path = value();
+  } else if (option == "--orientation") {
+    InputSpec& input = currentInput();
+    input.orientation_name = value();
+    input.orientation =
+        parseName(option, input.orientation_name, nf::Orientation::fromString);
+  } else if (nf::cli::isSolverOption(option)) {
+    const std::string replacement = nf::cli::replacementOption(option);
+    if (!replacement.empty()) {
+      std::cerr << "fuse_normals: warning: " << option << " is deprecated; use "
+                << replacement << "\n";
+    }
+    try {
+      std::ostream no_warnings(nullptr);  // printed above, with the prefix
+      nf::cli::applySolverOption(option, value(), options.settings,
+                                 no_warnings);
+    } catch (const nf::ParameterError& e) {
+      throw UsageError(e.what());
+    }
+  } else {
+    throw UsageError("unknown option '" + option + "' (see --help)");
+  }
+}
+
+/// The files and settings a run needs, as usage errors.
+void checkComplete(Options& options) {
+  if (options.image_path.empty()) throw UsageError("missing --image");
+  if (options.camera_info_path.empty()) {
+    throw UsageError("missing --camera-info");
+  }
+  if (options.inputs.empty()) throw UsageError("missing --normals");
+  if (options.output_path.empty()) throw UsageError("missing --output");
+  if (!hasFloatExtension(options.output_path)) {
+    throw UsageError("--output: expected a .exr or .pfm path, got '" +
+                     options.output_path + "'");
+  }
+  try {
+    options.settings.validate();
+  } catch (const nf::ParameterError& e) {
+    throw UsageError(std::string("solver settings: ") + e.what());
+  }
+}
+
 Options parseArguments(int argc, char** argv) {
   Options options;
-  nf::SolverSettings& s = options.settings;
   for (int i = 1; i < argc; ++i) {
     std::string option = argv[i];
     std::string inline_value;
@@ -148,7 +219,7 @@ Options parseArguments(int argc, char** argv) {
       if (has_inline_value) throw UsageError(option + " takes no value");
       if (option == "--help") options.help = true;
       if (option == "--print-settings-markdown") options.print_markdown = true;
-      if (option == "--no-edges") s.edges.enabled = false;
+      if (option == "--no-edges") options.settings.edges.enabled = false;
       continue;
     }
     const auto value = [&]() -> std::string {
@@ -156,68 +227,10 @@ Options parseArguments(int argc, char** argv) {
       if (i + 1 >= argc) throw UsageError(option + " needs a value");
       return argv[++i];
     };
-    const auto currentInput = [&]() -> InputSpec& {
-      if (options.inputs.empty()) {
-        throw UsageError(option + " must follow the --normals it applies to");
-      }
-      return options.inputs.back();
-    };
-    if (option == "--image") {
-      options.image_path = value();
-    } else if (option == "--camera-info") {
-      options.camera_info_path = value();
-    } else if (option == "--output") {
-      options.output_path = value();
-    } else if (option == "--normals") {
-      InputSpec input;
-      input.normals_path = value();
-      options.inputs.push_back(input);
-    } else if (option == "--weight") {
-      InputSpec& input = currentInput();
-      input.weight = parseDouble(option, value());
-      if (input.weight < 0.0) {
-        throw UsageError(option + ": expected a weight >= 0, got " +
-                         std::to_string(input.weight));
-      }
-    } else if (option == "--confidence") {
-      currentInput().confidence_path = value();
-    } else if (option == "--orientation") {
-      InputSpec& input = currentInput();
-      input.orientation_name = value();
-      input.orientation = parseName(option, input.orientation_name,
-                                    nf::Orientation::fromString);
-    } else if (nf::cli::isSolverOption(option)) {
-      const std::string replacement = nf::cli::replacementOption(option);
-      if (!replacement.empty()) {
-        std::cerr << "fuse_normals: warning: " << option
-                  << " is deprecated; use " << replacement << "\n";
-      }
-      try {
-        std::ostream no_warnings(nullptr);  // printed above, with the prefix
-        nf::cli::applySolverOption(option, value(), s, no_warnings);
-      } catch (const nf::ParameterError& e) {
-        throw UsageError(e.what());
-      }
-    } else {
-      throw UsageError("unknown option '" + option + "' (see --help)");
-    }
+    applyValueOption(option, value, options);
   }
   if (options.help || options.print_markdown) return options;
-  if (options.image_path.empty()) throw UsageError("missing --image");
-  if (options.camera_info_path.empty()) {
-    throw UsageError("missing --camera-info");
-  }
-  if (options.inputs.empty()) throw UsageError("missing --normals");
-  if (options.output_path.empty()) throw UsageError("missing --output");
-  if (!hasFloatExtension(options.output_path)) {
-    throw UsageError("--output: expected a .exr or .pfm path, got '" +
-                     options.output_path + "'");
-  }
-  try {
-    s.validate();
-  } catch (const nf::ParameterError& e) {
-    throw UsageError(std::string("solver settings: ") + e.what());
-  }
+  checkComplete(options);
   return options;
 }
 

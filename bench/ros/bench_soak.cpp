@@ -136,49 +136,26 @@ double slope(const std::vector<double>& x, const std::vector<double>& y) {
   return sxx > 0 ? sxy / sxx : 0.0;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  ros::init(argc, argv, "bench_soak", ros::init_options::AnonymousName);
-  const Options o = parseOptions(argc, argv);
-  ros::NodeHandle nh;
-  auto image_pub = nh.advertise<sensor_msgs::Image>("/image", 2);
-  auto info_pub = nh.advertise<sensor_msgs::CameraInfo>("/camera_info", 2);
-  auto n0_pub = nh.advertise<sensor_msgs::Image>("/normals_0", 2);
-  auto n1_pub = nh.advertise<sensor_msgs::Image>("/normals_1", 2);
-
+/// What /fusion_stats reported, filled by the subscriber's thread.
+struct Received {
   std::mutex mutex;
   std::vector<double> latency, frame_time, queue_time, solve_time, receive_s,
       reserve;
   std::uint64_t dropped = 0, skipped = 0, warm = 0;
-  const ros::WallTime start = ros::WallTime::now();
-  ros::Subscriber stats_sub = nh.subscribe<nf::FusionStats>(
-      "/fusion_stats", 100, [&](const nf::FusionStatsConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mutex);
-        receive_s.push_back((ros::WallTime::now() - start).toSec());
-        latency.push_back(m->latency);
-        frame_time.push_back(m->frame_time);
-        queue_time.push_back(m->queue_time);
-        solve_time.push_back(m->solve_time);
-        reserve.push_back(m->budget_reserve);
-        dropped = m->frames_dropped;
-        skipped = m->frames_skipped;
-        warm += m->warm_started ? 1 : 0;
-      });
-  ros::AsyncSpinner spinner(1);
-  spinner.start();
+};
 
-  // A second of frames, played in a loop (forward and back, so the motion
-  // has no jump); the stamps run on.
+struct Frame {
+  sensor_msgs::ImagePtr image, n0, n1;
+  sensor_msgs::CameraInfoPtr info;
+};
+
+/// A second of frames of the synthetic room, as messages.
+std::vector<Frame> renderMessages(const Options& o) {
   const int frames = std::max(2, static_cast<int>(o.rate));
   std::fprintf(stderr, "bench_soak: rendering %d frames at %dx%d\n", frames,
                o.width, o.height);
   const auto sequence =
       nf::synthetic::renderSequence(0, o.width, o.height, frames, 0.2, o.rate);
-  struct Frame {
-    sensor_msgs::ImagePtr image, n0, n1;
-    sensor_msgs::CameraInfoPtr info;
-  };
   std::vector<Frame> messages;
   for (int k = 0; k < frames; ++k) {
     const nf::test::NoisyFrame f = nf::test::noisyFrame(sequence[k], 500 + k);
@@ -189,27 +166,27 @@ int main(int argc, char** argv) {
          nf::test::normalsMessage(f.from_depth, header),
          nf::test::cameraInfoMessage(f.frame.K, o.width, o.height, header)});
   }
-  const int pid = pidOf(o.process);
-  if (pid < 0) {
-    std::fprintf(stderr, "bench_soak: no process for %s\n", o.process.c_str());
-    return 1;
-  }
-  for (int k = 0; k < 100 && image_pub.getNumSubscribers() == 0; ++k) {
-    ros::WallDuration(0.1).sleep();
-  }
-  if (image_pub.getNumSubscribers() == 0) {
-    std::fprintf(stderr,
-                 "bench_soak: nobody subscribes to /image (is the "
-                 "node up and lazy? bench_soak subscribes to "
-                 "/fusion_stats)\n");
-    return 1;
-  }
-  std::fprintf(stderr, "bench_soak: %.0f s at %.0f Hz into %s (pid %d)\n",
-               o.duration, o.rate, o.process.c_str(), pid);
+  return messages;
+}
 
-  std::vector<double> memory_t, memory_mib;
+struct Publishers {
+  ros::Publisher image, info, n0, n1;
+};
+
+/// Resident memory of the node's process, sampled every second.
+struct MemoryTrace {
+  std::vector<double> t, mib;
+};
+
+/// Publishes the frames in a loop (forward and back, so the motion has no
+/// jump; the stamps run on) until the duration is over; returns the number
+/// of sets published.
+std::uint64_t streamFrames(const Options& o, const std::vector<Frame>& messages,
+                           const Publishers& pubs, int pid,
+                           const ros::WallTime& stream_start,
+                           MemoryTrace& memory) {
+  const int frames = static_cast<int>(messages.size());
   std::uint64_t published = 0;
-  const ros::WallTime stream_start = ros::WallTime::now();
   ros::WallTime next_sample = stream_start;
   const double period = 1.0 / o.rate;
   ros::Time stamp = ros::Time::now();
@@ -230,72 +207,81 @@ int main(int argc, char** argv) {
     };
     auto info = boost::make_shared<sensor_msgs::CameraInfo>(*f.info);
     info->header.stamp = stamp;
-    info_pub.publish(info);
-    n0_pub.publish(with_stamp(f.n0));
-    n1_pub.publish(with_stamp(f.n1));
-    image_pub.publish(with_stamp(f.image));
+    pubs.info.publish(info);
+    pubs.n0.publish(with_stamp(f.n0));
+    pubs.n1.publish(with_stamp(f.n1));
+    pubs.image.publish(with_stamp(f.image));
     ++published;
     if (ros::WallTime::now() >= next_sample) {
-      memory_t.push_back(t);
-      memory_mib.push_back(residentMiB(pid));
+      memory.t.push_back(t);
+      memory.mib.push_back(residentMiB(pid));
       next_sample += ros::WallDuration(1.0);
     }
   }
-  ros::WallDuration(1.0).sleep();  // the last outputs
-  spinner.stop();
+  return published;
+}
 
-  std::lock_guard<std::mutex> lock(mutex);
-  std::vector<double> t_after, m_after;
-  for (std::size_t i = 0; i < memory_t.size(); ++i) {
-    if (memory_t[i] >= o.warmup) {
-      t_after.push_back(memory_t[i] / 60.0);
-      m_after.push_back(memory_mib[i]);
-    }
-  }
-  const double seconds = (ros::WallTime::now() - stream_start).toSec();
-  const double budget = o.budget_ms / 1e3;
-  auto ms = [](double s) { return 1e3 * s; };
+void printCounts(const Options& o, const Received& r, std::uint64_t published,
+                 double seconds) {
   std::printf("| bench_soak | %dx%d, 2 inputs, %.0f Hz, %.0f s |\n", o.width,
               o.height, o.rate, o.duration);
   std::printf("|---|---|\n");
   std::printf("| sets published | %llu |\n",
               static_cast<unsigned long long>(published));
   std::printf("| outputs | %zu (%.1f Hz), %llu warm-started |\n",
-              latency.size(), latency.size() / seconds,
-              static_cast<unsigned long long>(warm));
+              r.latency.size(), r.latency.size() / seconds,
+              static_cast<unsigned long long>(r.warm));
   std::printf("| dropped (worker busy) | %llu (%.1f %%) |\n",
-              static_cast<unsigned long long>(dropped),
-              published > 0 ? 100.0 * dropped / published : 0.0);
+              static_cast<unsigned long long>(r.dropped),
+              published > 0 ? 100.0 * r.dropped / published : 0.0);
   std::printf("| skipped (bad input) | %llu |\n",
-              static_cast<unsigned long long>(skipped));
-  std::printf("| lost (neither output nor counted) | %lld |\n",
-              static_cast<long long>(published) -
-                  static_cast<long long>(latency.size() + dropped + skipped));
+              static_cast<unsigned long long>(r.skipped));
+  std::printf(
+      "| lost (neither output nor counted) | %lld |\n",
+      static_cast<long long>(published) -
+          static_cast<long long>(r.latency.size() + r.dropped + r.skipped));
+}
+
+void printTimes(const Options& o, const Received& r) {
+  const double budget = o.budget_ms / 1e3;
+  auto ms = [](double s) { return 1e3 * s; };
   std::printf(
       "| frame time (budget %.0f ms) p50 / p95 / p99 / max | %.1f / %.1f / "
       "%.1f / %.1f ms, %.1f %% over the budget |\n",
-      o.budget_ms, ms(percentile(frame_time, 0.5)),
-      ms(percentile(frame_time, 0.95)), ms(percentile(frame_time, 0.99)),
-      ms(percentile(frame_time, 1.0)), 100.0 * shareAbove(frame_time, budget));
+      o.budget_ms, ms(percentile(r.frame_time, 0.5)),
+      ms(percentile(r.frame_time, 0.95)), ms(percentile(r.frame_time, 0.99)),
+      ms(percentile(r.frame_time, 1.0)),
+      100.0 * shareAbove(r.frame_time, budget));
   std::printf(
       "| latency (set complete -> outputs) p50 / p95 / p99 / max | %.1f / "
       "%.1f / %.1f / %.1f ms, %.1f %% over the budget |\n",
-      ms(percentile(latency, 0.5)), ms(percentile(latency, 0.95)),
-      ms(percentile(latency, 0.99)), ms(percentile(latency, 1.0)),
-      100.0 * shareAbove(latency, budget));
+      ms(percentile(r.latency, 0.5)), ms(percentile(r.latency, 0.95)),
+      ms(percentile(r.latency, 0.99)), ms(percentile(r.latency, 1.0)),
+      100.0 * shareAbove(r.latency, budget));
   std::printf("| queue time p50 / p95 / max | %.1f / %.1f / %.1f ms |\n",
-              ms(percentile(queue_time, 0.5)), ms(percentile(queue_time, 0.95)),
-              ms(percentile(queue_time, 1.0)));
+              ms(percentile(r.queue_time, 0.5)),
+              ms(percentile(r.queue_time, 0.95)),
+              ms(percentile(r.queue_time, 1.0)));
   std::printf("| solve time p50 / p95 | %.1f / %.1f ms |\n",
-              ms(percentile(solve_time, 0.5)),
-              ms(percentile(solve_time, 0.95)));
+              ms(percentile(r.solve_time, 0.5)),
+              ms(percentile(r.solve_time, 0.95)));
   std::printf("| overrun reserve p50 / max | %.1f / %.1f ms |\n",
-              ms(percentile(reserve, 0.5)), ms(percentile(reserve, 1.0)));
+              ms(percentile(r.reserve, 0.5)), ms(percentile(r.reserve, 1.0)));
+}
+
+void printMemory(const Options& o, const MemoryTrace& memory, double seconds) {
+  std::vector<double> t_after, m_after;
+  for (std::size_t i = 0; i < memory.t.size(); ++i) {
+    if (memory.t[i] >= o.warmup) {
+      t_after.push_back(memory.t[i] / 60.0);
+      m_after.push_back(memory.mib[i]);
+    }
+  }
   std::printf(
       "| resident memory: start / end, slope after %.0f s | %.1f / %.1f MiB, "
       "%.2f MiB/min |\n",
-      o.warmup, memory_mib.empty() ? 0.0 : memory_mib.front(),
-      memory_mib.empty() ? 0.0 : memory_mib.back(), slope(t_after, m_after));
+      o.warmup, memory.mib.empty() ? 0.0 : memory.mib.front(),
+      memory.mib.empty() ? 0.0 : memory.mib.back(), slope(t_after, m_after));
   // The shape of the curve: a slope that falls towards 0 is the allocator
   // settling, one that stays is a leak.
   std::vector<double> t_late, m_late;
@@ -308,12 +294,75 @@ int main(int argc, char** argv) {
   std::printf("| resident memory slope, second half | %.2f MiB/min |\n",
               slope(t_late, m_late));
   std::printf("| resident memory each minute | ");
-  for (std::size_t i = 0; i < memory_t.size(); ++i) {
-    if (i == 0 || static_cast<int>(memory_t[i] / 60.0) !=
-                      static_cast<int>(memory_t[i - 1] / 60.0)) {
-      std::printf("%.0f ", memory_mib[i]);
+  for (std::size_t i = 0; i < memory.t.size(); ++i) {
+    if (i == 0 || static_cast<int>(memory.t[i] / 60.0) !=
+                      static_cast<int>(memory.t[i - 1] / 60.0)) {
+      std::printf("%.0f ", memory.mib[i]);
     }
   }
   std::printf("MiB |\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "bench_soak", ros::init_options::AnonymousName);
+  const Options o = parseOptions(argc, argv);
+  ros::NodeHandle nh;
+  Publishers pubs;
+  pubs.image = nh.advertise<sensor_msgs::Image>("/image", 2);
+  pubs.info = nh.advertise<sensor_msgs::CameraInfo>("/camera_info", 2);
+  pubs.n0 = nh.advertise<sensor_msgs::Image>("/normals_0", 2);
+  pubs.n1 = nh.advertise<sensor_msgs::Image>("/normals_1", 2);
+
+  Received received;
+  const ros::WallTime start = ros::WallTime::now();
+  ros::Subscriber stats_sub = nh.subscribe<nf::FusionStats>(
+      "/fusion_stats", 100, [&](const nf::FusionStatsConstPtr& m) {
+        std::lock_guard<std::mutex> lock(received.mutex);
+        received.receive_s.push_back((ros::WallTime::now() - start).toSec());
+        received.latency.push_back(m->latency);
+        received.frame_time.push_back(m->frame_time);
+        received.queue_time.push_back(m->queue_time);
+        received.solve_time.push_back(m->solve_time);
+        received.reserve.push_back(m->budget_reserve);
+        received.dropped = m->frames_dropped;
+        received.skipped = m->frames_skipped;
+        received.warm += m->warm_started ? 1 : 0;
+      });
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+
+  const std::vector<Frame> messages = renderMessages(o);
+  const int pid = pidOf(o.process);
+  if (pid < 0) {
+    std::fprintf(stderr, "bench_soak: no process for %s\n", o.process.c_str());
+    return 1;
+  }
+  for (int k = 0; k < 100 && pubs.image.getNumSubscribers() == 0; ++k) {
+    ros::WallDuration(0.1).sleep();
+  }
+  if (pubs.image.getNumSubscribers() == 0) {
+    std::fprintf(stderr,
+                 "bench_soak: nobody subscribes to /image (is the "
+                 "node up and lazy? bench_soak subscribes to "
+                 "/fusion_stats)\n");
+    return 1;
+  }
+  std::fprintf(stderr, "bench_soak: %.0f s at %.0f Hz into %s (pid %d)\n",
+               o.duration, o.rate, o.process.c_str(), pid);
+
+  MemoryTrace memory;
+  const ros::WallTime stream_start = ros::WallTime::now();
+  const std::uint64_t published =
+      streamFrames(o, messages, pubs, pid, stream_start, memory);
+  ros::WallDuration(1.0).sleep();  // the last outputs
+  spinner.stop();
+
+  std::lock_guard<std::mutex> lock(received.mutex);
+  const double seconds = (ros::WallTime::now() - stream_start).toSec();
+  printCounts(o, received, published, seconds);
+  printTimes(o, received);
+  printMemory(o, memory, seconds);
   return 0;
 }

@@ -208,6 +208,100 @@ class StampSynchronizer {
     return Pick::kAbsent;
   }
 
+  /// A set being formed: the message chosen per topic (-1: none) and the
+  /// range of their stamps.
+  struct Choice {
+    std::vector<int> chosen;
+    std::int64_t lo_stamp, hi_stamp;
+  };
+
+  void choose(int topic, int index, Choice& choice) const {
+    const std::int64_t s = queues_[topic][index].stamp;
+    choice.chosen[topic] = index;
+    choice.lo_stamp = std::min(choice.lo_stamp, s);
+    choice.hi_stamp = std::max(choice.hi_stamp, s);
+  }
+
+  /// The required topics' messages for the pivot at t (they define the set):
+  /// kFound, kWait, or kAbsent with the topic to blame in *failed_topic (the
+  /// first one without a message, or the one farthest from the pivot when
+  /// the spread is too large).
+  Pick chooseRequired(std::int64_t t, std::int64_t next_pivot, bool at_end,
+                      Choice& choice, int* failed_topic) const {
+    const int T = numTopics();
+    for (int j = 1; j < T; ++j) {
+      if (!required_[j]) continue;
+      int index = -1;
+      const Pick p = pick(j, t, next_pivot, at_end, &index);
+      if (p == Pick::kWait) return Pick::kWait;
+      if (p == Pick::kAbsent) {
+        *failed_topic = j;
+        return Pick::kAbsent;
+      }
+      choose(j, index, choice);
+    }
+    if (choice.hi_stamp - choice.lo_stamp <= options_.max_interval_ns) {
+      return Pick::kFound;
+    }
+    std::int64_t worst = -1;
+    for (int j = 1; j < T; ++j) {
+      if (choice.chosen[j] < 0) continue;
+      const std::int64_t d = std::llabs(queues_[j][choice.chosen[j]].stamp - t);
+      if (d > worst) {
+        worst = d;
+        *failed_topic = j;
+      }
+    }
+    return Pick::kAbsent;
+  }
+
+  /// Optional topics join when they keep the spread within bounds.
+  void chooseOptional(std::int64_t t, std::int64_t next_pivot, bool at_end,
+                      Choice& choice) const {
+    for (int j = 1; j < numTopics(); ++j) {
+      if (required_[j]) continue;
+      int index = -1;
+      if (pick(j, t, next_pivot, at_end, &index) != Pick::kFound) continue;
+      const std::int64_t s = queues_[j][index].stamp;
+      if (std::max(choice.hi_stamp, s) - std::min(choice.lo_stamp, s) >
+          options_.max_interval_ns) {
+        continue;
+      }
+      choose(j, index, choice);
+    }
+  }
+
+  /// No set for the pivot at t: discard it and what can no longer match.
+  void discardPivot(std::int64_t t, int failed_topic) {
+    Discard discard;
+    discard.stamp_ns = t;
+    discard.missing_topic = failed_topic;
+    discard.nearest_ns = nearestStamp(failed_topic, t);
+    discards_.push_back(discard);
+    ++unmatched_pivots_;
+    queues_[0].pop_front();
+    pruneOlderThan(t);
+  }
+
+  /// The chosen messages as a set; each message joins one set, so it and
+  /// everything older leave their queues.
+  Set takeSet(std::int64_t t, const Choice& choice) {
+    const int T = numTopics();
+    Set set;
+    set.stamp_ns = t;
+    set.messages.resize(T);
+    set.present.assign(T, false);
+    for (int j = 0; j < T; ++j) {
+      const int chosen = choice.chosen[j];
+      if (chosen < 0) continue;
+      set.messages[j] = queues_[j][chosen].message;
+      set.present[j] = true;
+      queues_[j].erase(queues_[j].begin(), queues_[j].begin() + chosen + 1);
+    }
+    pruneOlderThan(t);
+    return set;
+  }
+
   std::vector<Set> decide(bool at_end) {
     std::vector<Set> sets;
     auto& pivots = queues_[0];
@@ -215,82 +309,18 @@ class StampSynchronizer {
       const std::int64_t t = pivots.front().stamp;
       const std::int64_t next_pivot =
           pivots.size() > 1 ? pivots[1].stamp : kNone;
-      const int T = numTopics();
-      std::vector<int> chosen(T, -1);
-      chosen[0] = 0;
-      bool wait = false, fail = false;
+      Choice choice{std::vector<int>(numTopics(), -1), t, t};
+      choice.chosen[0] = 0;
       int failed_topic = -1;
-      std::int64_t lo_stamp = t, hi_stamp = t;
-      // Required topics first: they define the set.
-      for (int j = 1; j < T && !wait && !fail; ++j) {
-        if (!required_[j]) continue;
-        int index = -1;
-        const Pick p = pick(j, t, next_pivot, at_end, &index);
-        if (p == Pick::kWait) {
-          wait = true;
-        } else if (p == Pick::kAbsent) {
-          fail = true;
-          failed_topic = j;
-        } else {
-          chosen[j] = index;
-          lo_stamp = std::min(lo_stamp, queues_[j][index].stamp);
-          hi_stamp = std::max(hi_stamp, queues_[j][index].stamp);
-        }
-      }
-      if (wait) break;
-      if (!fail && hi_stamp - lo_stamp > options_.max_interval_ns) {
-        fail = true;
-        // The required topic whose stamp lies farthest from the pivot's.
-        std::int64_t worst = -1;
-        for (int j = 1; j < T; ++j) {
-          if (chosen[j] < 0) continue;
-          const std::int64_t d = std::llabs(queues_[j][chosen[j]].stamp - t);
-          if (d > worst) {
-            worst = d;
-            failed_topic = j;
-          }
-        }
-      }
-      if (fail) {
-        Discard discard;
-        discard.stamp_ns = t;
-        discard.missing_topic = failed_topic;
-        discard.nearest_ns = nearestStamp(failed_topic, t);
-        discards_.push_back(discard);
-        // No set for this pivot: discard it and what can no longer match.
-        ++unmatched_pivots_;
-        pivots.pop_front();
-        pruneOlderThan(t);
+      const Pick required =
+          chooseRequired(t, next_pivot, at_end, choice, &failed_topic);
+      if (required == Pick::kWait) break;
+      if (required == Pick::kAbsent) {
+        discardPivot(t, failed_topic);
         continue;
       }
-      // Optional topics join when they keep the spread within bounds.
-      for (int j = 1; j < T; ++j) {
-        if (required_[j]) continue;
-        int index = -1;
-        if (pick(j, t, next_pivot, at_end, &index) != Pick::kFound) continue;
-        const std::int64_t s = queues_[j][index].stamp;
-        if (std::max(hi_stamp, s) - std::min(lo_stamp, s) >
-            options_.max_interval_ns) {
-          continue;
-        }
-        chosen[j] = index;
-        lo_stamp = std::min(lo_stamp, s);
-        hi_stamp = std::max(hi_stamp, s);
-      }
-      Set set;
-      set.stamp_ns = t;
-      set.messages.resize(T);
-      set.present.assign(T, false);
-      for (int j = 0; j < T; ++j) {
-        if (chosen[j] < 0) continue;
-        set.messages[j] = queues_[j][chosen[j]].message;
-        set.present[j] = true;
-        // Each message joins one set: drop it and everything older.
-        queues_[j].erase(queues_[j].begin(),
-                         queues_[j].begin() + chosen[j] + 1);
-      }
-      pruneOlderThan(t);
-      sets.push_back(std::move(set));
+      chooseOptional(t, next_pivot, at_end, choice);
+      sets.push_back(takeSet(t, choice));
     }
     return sets;
   }

@@ -8,6 +8,7 @@
 #include <limits>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/errors.h"
@@ -82,6 +83,64 @@ std::vector<float> luminanceOf(const ColorImage& guide) {
   return luminance;
 }
 
+/// Spatial kernel exp(-(dx^2 + dy^2) / (2 sigma_S^2)) over the window, row by
+/// row (side = 2 half_window + 1).
+std::vector<float> spatialKernel(const BilateralSettings& settings) {
+  const int w = settings.half_window;
+  const int side = 2 * w + 1;
+  std::vector<float> spatial_weight(static_cast<std::size_t>(side) * side);
+  const double inv_two_var_s =
+      1.0 / (2.0 * settings.sigma_spatial * settings.sigma_spatial);
+  for (int dy = -w; dy <= w; ++dy) {
+    for (int dx = -w; dx <= w; ++dx) {
+      const double weight = std::exp(-(dx * dx + dy * dy) * inv_two_var_s);
+      spatial_weight[(dy + w) * side + (dx + w)] =
+          std::max(kMinSpatialWeight, static_cast<float>(weight));
+    }
+  }
+  return spatial_weight;
+}
+
+/// Intensity table exp(-d^2 / (2 sigma_I^2)) for |I(x) - I(x')| = d in [0, 1].
+std::vector<float> intensityTable(const BilateralSettings& settings) {
+  std::vector<float> intensity_weight(kIntensityTableSize);
+  const double inv_two_var_i =
+      1.0 / (2.0 * settings.sigma_intensity * settings.sigma_intensity);
+  for (int k = 0; k < kIntensityTableSize; ++k) {
+    const double d = static_cast<double>(k) / (kIntensityTableSize - 1);
+    intensity_weight[k] =
+        std::max(kMinIntensityWeight,
+                 static_cast<float>(std::exp(-d * d * inv_two_var_i)));
+  }
+  return intensity_weight;
+}
+
+/// Unit input normals, with missing ones stored as the zero vector so that
+/// they drop out of the weighted sums; `valid` is 1 or 0.
+struct UnitNormals {
+  std::vector<float> x, y, z, valid;
+};
+
+UnitNormals unitNormalsOf(const NormalMap& normals) {
+  const std::size_t count = normals.pixelCount();
+  std::vector<float> unit_x(count), unit_y(count), unit_z(count), valid(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    const float x = normals.plane(0)[i], y = normals.plane(1)[i],
+                z = normals.plane(2)[i];
+    if (isValidNormal(x, y, z)) {
+      const float inv_len = 1.0f / std::sqrt(x * x + y * y + z * z);
+      unit_x[i] = x * inv_len;
+      unit_y[i] = y * inv_len;
+      unit_z[i] = z * inv_len;
+      valid[i] = 1.0f;
+    } else {
+      unit_x[i] = unit_y[i] = unit_z[i] = valid[i] = 0.0f;
+    }
+  }
+  return {std::move(unit_x), std::move(unit_y), std::move(unit_z),
+          std::move(valid)};
+}
+
 }  // namespace
 
 NormalMap crossBilateralFilter(const NormalMap& normals,
@@ -97,53 +156,18 @@ NormalMap crossBilateralFilter(const NormalMap& normals,
 
   const int w = settings.half_window;
   const int side = 2 * w + 1;
-  // Spatial kernel exp(-(dx^2 + dy^2) / (2 sigma_S^2)) over the window.
-  std::vector<float> spatial_weight(static_cast<std::size_t>(side) * side);
-  const double inv_two_var_s =
-      1.0 / (2.0 * settings.sigma_spatial * settings.sigma_spatial);
-  for (int dy = -w; dy <= w; ++dy) {
-    for (int dx = -w; dx <= w; ++dx) {
-      const double weight = std::exp(-(dx * dx + dy * dy) * inv_two_var_s);
-      spatial_weight[(dy + w) * side + (dx + w)] =
-          std::max(kMinSpatialWeight, static_cast<float>(weight));
-    }
-  }
-  // Intensity table exp(-d^2 / (2 sigma_I^2)) for |I(x) - I(x')| = d in [0, 1].
-  std::vector<float> intensity_weight(kIntensityTableSize);
-  const double inv_two_var_i =
-      1.0 / (2.0 * settings.sigma_intensity * settings.sigma_intensity);
-  for (int k = 0; k < kIntensityTableSize; ++k) {
-    const double d = static_cast<double>(k) / (kIntensityTableSize - 1);
-    intensity_weight[k] =
-        std::max(kMinIntensityWeight,
-                 static_cast<float>(std::exp(-d * d * inv_two_var_i)));
-  }
+  const std::vector<float> spatial_weight = spatialKernel(settings);
+  const std::vector<float> intensity_weight = intensityTable(settings);
   const float table_scale = static_cast<float>(kIntensityTableSize - 1);
-
   const std::vector<float> luminance = luminanceOf(guide);
-  // Unit input normals, with missing ones stored as the zero vector so that
-  // they drop out of the weighted sums; `valid` is 1 or 0.
-  std::vector<float> unit_x(count), unit_y(count), unit_z(count), valid(count);
-  for (std::size_t i = 0; i < count; ++i) {
-    const float x = normals.plane(0)[i], y = normals.plane(1)[i],
-                z = normals.plane(2)[i];
-    if (isValidNormal(x, y, z)) {
-      const float inv_len = 1.0f / std::sqrt(x * x + y * y + z * z);
-      unit_x[i] = x * inv_len;
-      unit_y[i] = y * inv_len;
-      unit_z[i] = z * inv_len;
-      valid[i] = 1.0f;
-    } else {
-      unit_x[i] = unit_y[i] = unit_z[i] = valid[i] = 0.0f;
-    }
-  }
+  const UnitNormals unit = unitNormalsOf(normals);
 
   const int threads = resolveThreadCount(settings.num_threads);
   const float* lum = luminance.data();
-  const float* nx = unit_x.data();
-  const float* ny = unit_y.data();
-  const float* nz = unit_z.data();
-  const float* ok = valid.data();
+  const float* nx = unit.x.data();
+  const float* ny = unit.y.data();
+  const float* nz = unit.z.data();
+  const float* ok = unit.valid.data();
   const float* kernel = spatial_weight.data();
   const float* table = intensity_weight.data();
   float* out_x = filtered.plane(0);

@@ -179,6 +179,7 @@ constexpr int kBlock = 16;
 /// columns after the row's last pixel). For each pixel: the least squares
 /// A du + B dv + C' = w - w_c over the neighbours with |z - z_c| <= tau(z_c),
 /// then g = K^T (A, B, C - A u - B v), n = -g / |g|, and the confidence.
+// Over 80 lines: its passes share the block's sums, which stay in registers.
 NF_MULTIVERSION
 void planeFitRow(int width, int y, int R, std::ptrdiff_t stride,
                  const Camera& cam, float ratio, float noise_k,

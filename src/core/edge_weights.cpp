@@ -142,43 +142,13 @@ void exponentialWeightRow(int W, float scale, float w_min,
   }
 }
 
-}  // namespace
-
-namespace internal {
-
-std::size_t EdgeWeightScratch::bytesHeld() const {
-  std::size_t bytes = 0;
-  for (const std::vector<float>* v :
-       {&mag_h, &mag_v, &plane, &blurred, &blur, &kernel}) {
-    bytes += internal::bytesHeld(*v);
-  }
-  return bytes;
-}
-
-void computeEdgeWeightsInto(const ColorImage& image,
-                            const EdgeWeightSettings& settings,
-                            PlanarImage& weights, EdgeWeightScratch& scratch,
-                            int threads) {
-  if (image.empty() || (image.channels() != 1 && image.channels() != 3)) {
-    throw InputError("edge weights: expected a 1- or 3-channel image, got " +
-                     std::to_string(image.channels()) + " channels");
-  }
+/// The gradient magnitude per direction into scratch.mag_h, mag_v (sized and
+/// zeroed): of the luminance, or the largest over the colour channels.
+void gradientMagnitudes(const ColorImage& image,
+                        const EdgeWeightSettings& settings,
+                        internal::EdgeWeightScratch& scratch, int threads) {
   const int W = image.width(), H = image.height();
   const std::size_t N = image.pixelCount();
-  weights.resize(W, H, 2);
-  if (!settings.enabled) {
-    weights.fill(1.0f);
-    return;
-  }
-  for (std::vector<float>* v : {&scratch.mag_h, &scratch.mag_v, &scratch.plane,
-                                &scratch.blurred, &scratch.blur}) {
-    v->resize(N);
-  }
-  std::fill(scratch.mag_h.begin(), scratch.mag_h.end(), 0.0f);
-  std::fill(scratch.mag_v.begin(), scratch.mag_v.end(), 0.0f);
-
-  // Gradient magnitude per direction: of the luminance, or the largest over
-  // the colour channels.
   const bool luminance =
       image.channels() == 3 && settings.color_mode == EdgeColorMode::kLuminance;
   const int passes = luminance ? 1 : image.channels();
@@ -207,7 +177,13 @@ void computeEdgeWeightsInto(const ColorImage& image,
                              scratch.mag_v.data(), W, H, threads);
     }
   }
+}
 
+/// The weight of each link from the gradient magnitudes in scratch.
+void linkWeights(const EdgeWeightSettings& settings,
+                 const internal::EdgeWeightScratch& scratch,
+                 PlanarImage& weights, int threads) {
+  const int W = weights.width(), H = weights.height();
   const bool exponential =
       settings.function == EdgeWeightFunction::kExponential;
   const double alpha = settings.alpha, beta = settings.beta;
@@ -251,6 +227,45 @@ void computeEdgeWeightsInto(const ColorImage& image,
       }
     }
   }
+}
+
+}  // namespace
+
+namespace internal {
+
+std::size_t EdgeWeightScratch::bytesHeld() const {
+  std::size_t bytes = 0;
+  for (const std::vector<float>* v :
+       {&mag_h, &mag_v, &plane, &blurred, &blur, &kernel}) {
+    bytes += internal::bytesHeld(*v);
+  }
+  return bytes;
+}
+
+void computeEdgeWeightsInto(const ColorImage& image,
+                            const EdgeWeightSettings& settings,
+                            PlanarImage& weights, EdgeWeightScratch& scratch,
+                            int threads) {
+  if (image.empty() || (image.channels() != 1 && image.channels() != 3)) {
+    throw InputError("edge weights: expected a 1- or 3-channel image, got " +
+                     std::to_string(image.channels()) + " channels");
+  }
+  const int W = image.width(), H = image.height();
+  const std::size_t N = image.pixelCount();
+  weights.resize(W, H, 2);
+  if (!settings.enabled) {
+    weights.fill(1.0f);
+    return;
+  }
+  for (std::vector<float>* v : {&scratch.mag_h, &scratch.mag_v, &scratch.plane,
+                                &scratch.blurred, &scratch.blur}) {
+    v->resize(N);
+  }
+  std::fill(scratch.mag_h.begin(), scratch.mag_h.end(), 0.0f);
+  std::fill(scratch.mag_v.begin(), scratch.mag_v.end(), 0.0f);
+
+  gradientMagnitudes(image, settings, scratch, threads);
+  linkWeights(settings, scratch, weights, threads);
 }
 
 }  // namespace internal

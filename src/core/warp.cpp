@@ -112,6 +112,7 @@ constexpr int kChunk = 64;
 /// rotation and normalization). Writes n_cur (NaN where no prediction) and,
 /// per pixel, the source's first corner (-1: none), its steps to the right
 /// and down, and the blend weights.
+// Over 80 lines: its vectorised passes share the chunk's stack arrays.
 NF_MULTIVERSION
 void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                       int count, const float* __restrict n0,

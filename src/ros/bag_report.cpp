@@ -26,6 +26,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/errors.h"
@@ -156,193 +157,255 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+struct Options {
   std::string input, fused_path, dir, offline, ground_truth,
       title = "normal_fusion demo";
+};
+
+/// Reads the command line into `options`; false (after a message) on a
+/// missing value or an unknown option.
+bool parseOptions(int argc, char** argv, Options& options) {
   for (int i = 1; i < argc; ++i) {
     const std::string key = argv[i];
     if (i + 1 >= argc) {
       std::fprintf(stderr, "bag_report: %s needs a value\n%s", key.c_str(),
                    kUsage);
-      return 2;
+      return false;
     }
     const std::string value = argv[++i];
     if (key == "--input") {
-      input = value;
+      options.input = value;
     } else if (key == "--fused") {
-      fused_path = value;
+      options.fused_path = value;
     } else if (key == "--dir") {
-      dir = value;
+      options.dir = value;
     } else if (key == "--offline") {
-      offline = value;
+      options.offline = value;
     } else if (key == "--ground-truth") {
-      ground_truth = value;
+      options.ground_truth = value;
     } else if (key == "--title") {
-      title = value;
+      options.title = value;
     } else {
       std::fprintf(stderr, "bag_report: unknown option %s\n%s", key.c_str(),
                    kUsage);
-      return 2;
+      return false;
     }
   }
-  if (input.empty() || fused_path.empty() || dir.empty()) {
+  return true;
+}
+
+/// Every topic the report reads, by stamp.
+struct Bags {
+  Stamped images, normals0, normals1, fused;
+  std::map<ros::Time, normal_fusion::FusionStatsConstPtr> stats;
+  Stamped fused_offline, gt;
+};
+
+Bags readBags(const Options& options) {
+  Bags bags;
+  bags.images = readImages(options.input, "/image");
+  bags.normals0 = readImages(options.input, "/normals_0");
+  bags.normals1 = readImages(options.input, "/normals_1");
+  bags.fused = readImages(options.fused_path, "/fused_normals");
+  bags.stats = readStats(options.fused_path);
+  if (!options.offline.empty()) {
+    bags.fused_offline = readImages(options.offline, "/fused_normals");
+  }
+  if (!options.ground_truth.empty()) {
+    bags.gt = readImages(options.ground_truth, "/normals_gt");
+  }
+  return bags;
+}
+
+/// What the frames add up to, and the per-frame table of the summary.
+struct Tally {
+  std::ostringstream table;
+  std::vector<double> rough_in0, rough_in1, rough_out, solve, latency, inner,
+      offline_diff, psnr_in0, psnr_in1, psnr_out, angle_in0, angle_in1,
+      angle_out;
+  double valid0 = 0, valid1 = 0;
+  int warm = 0;
+  std::uint64_t dropped = 0, skipped = 0;
+};
+
+/// Writes DIR/frames/frame_NNN.png (and DIR/first_frame.png for the first)
+/// and returns the inputs of that stamp (empty where missing).
+std::pair<nf::NormalMap, nf::NormalMap> writeFramePicture(
+    const Bags& bags, const ros::Time& stamp, const nf::NormalMap& out,
+    int index, const std::string& dir, Tally& tally) {
+  const int W = out.width(), H = out.height();
+  std::vector<cv::Mat> tiles;
+  if (bags.images.count(stamp)) {
+    tiles.push_back(labelled(imagePicture(*bags.images.at(stamp)), "image"));
+  }
+  nf::NormalMap in0, in1;
+  if (bags.normals0.count(stamp)) {
+    in0 = normalsOf(*bags.normals0.at(stamp));
+    tiles.push_back(labelled(picture(in0, W, H), "normals_0 (fine)"));
+    tally.rough_in0.push_back(roughnessDeg(in0));
+    tally.valid0 += validShare(in0);
+  }
+  if (bags.normals1.count(stamp)) {
+    in1 = normalsOf(*bags.normals1.at(stamp));
+    tiles.push_back(labelled(picture(in1, W, H), "normals_1 (coarse)"));
+    tally.rough_in1.push_back(roughnessDeg(in1));
+    tally.valid1 += validShare(in1);
+  }
+  tiles.push_back(labelled(picture(out, W, H), "fused"));
+  tally.rough_out.push_back(roughnessDeg(out));
+  cv::Mat row;
+  cv::hconcat(tiles, row);
+  char name[64];
+  std::snprintf(name, sizeof(name), "/frames/frame_%03d.png", index);
+  cv::imwrite(dir + name, row);
+  if (index == 0) cv::imwrite(dir + "/first_frame.png", row);
+  return {in0, in1};
+}
+
+/// Adds the largest difference to the offline run and the errors against the
+/// ground truth, where the bags have that stamp.
+void compareFrame(const Bags& bags, const ros::Time& stamp,
+                  const nf::NormalMap& out, const nf::NormalMap& in0,
+                  Tally& tally) {
+  if (bags.fused_offline.count(stamp)) {
+    const nf::NormalMap other = normalsOf(*bags.fused_offline.at(stamp));
+    double worst = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      for (std::size_t i = 0; i < out.pixelCount(); ++i) {
+        worst = std::max(
+            worst,
+            static_cast<double>(std::abs(out.plane(c)[i] - other.plane(c)[i])));
+      }
+    }
+    tally.offline_diff.push_back(worst);
+  }
+  if (bags.gt.count(stamp)) {
+    const nf::NormalMap truth = normalsOf(*bags.gt.at(stamp));
+    tally.psnr_out.push_back(nf::psnr(out, truth));
+    tally.angle_out.push_back(nf::angularError(out, truth).mean_deg);
+    if (!in0.empty() && in0.sameSize(truth)) {
+      tally.psnr_in0.push_back(nf::psnr(in0, truth));
+      tally.angle_in0.push_back(nf::angularError(in0, truth).mean_deg);
+    }
+  }
+}
+
+/// One row of the per-frame table from /fusion_stats (null: none).
+void addStatsRow(const normal_fusion::FusionStatsConstPtr& st, int index,
+                 const ros::Time& stamp, Tally& tally) {
+  std::ostringstream& table = tally.table;
+  table << "| " << index << " | " << stamp.toSec() << " | ";
+  if (!st) {
+    table << "(no stats) | | | | | | | | |\n";
+    return;
+  }
+  std::string present;
+  for (std::size_t i = 0; i < st->inputs_present.size(); ++i) {
+    present += st->inputs_present[i] ? std::to_string(i) : "-";
+  }
+  table << present << " | " << st->outer_iterations << " | "
+        << st->inner_iterations + st->coarse_inner_iterations << " | "
+        << (st->warm_started ? "yes" : "no") << " | " << 1e3 * st->solve_time
+        << " | " << 1e3 * st->latency << " | " << st->initial_energy << " | "
+        << st->final_energy << " | " << st->frames_dropped << " |\n";
+  tally.solve.push_back(st->solve_time);
+  tally.latency.push_back(st->latency);
+  tally.inner.push_back(st->inner_iterations + st->coarse_inner_iterations);
+  tally.warm += st->warm_started;
+  tally.dropped = std::max<std::uint64_t>(tally.dropped, st->frames_dropped);
+  tally.skipped = std::max<std::uint64_t>(tally.skipped, st->frames_skipped);
+}
+
+void writeSummary(const Options& options, const Bags& bags, const Tally& tally,
+                  int frames) {
+  std::ofstream md(options.dir + "/summary.md");
+  md << "# " << options.title << "\n\n";
+  md << "- input bag: `" << options.input << "` (" << bags.images.size()
+     << " images, " << bags.normals0.size() << " maps on /normals_0, "
+     << bags.normals1.size() << " on /normals_1)\n";
+  md << "- fused by the nodelet (bag.launch): `" << options.fused_path
+     << "`: " << frames << " fused frames, " << tally.warm << " warm-started, "
+     << tally.dropped << " dropped (worker busy), " << tally.skipped
+     << " skipped (bad input)\n";
+  md << "- solve time per frame: mean " << 1e3 * mean(tally.solve)
+     << " ms; latency (set complete -> outputs ready): mean "
+     << 1e3 * mean(tally.latency) << " ms; inner iterations per frame: mean "
+     << mean(tally.inner) << "\n";
+  if (!options.offline.empty()) {
+    const std::vector<double>& diff = tally.offline_diff;
+    md << "- the same bag through `fuse_bag` (`" << options.offline
+       << "`): " << bags.fused_offline.size() << " frames; " << diff.size()
+       << " frames in both; largest difference of a normal component: "
+       << (diff.empty() ? 0.0 : *std::max_element(diff.begin(), diff.end()))
+       << "\n";
+  }
+  md << "\n## Maps\n\n"
+     << "Roughness = mean angle between neighbouring normals (degrees; "
+        "lower is smoother); valid = share of pixels with a normal.\n\n"
+     << "| map | roughness (deg) | valid |\n|---|---|---|\n";
+  if (!tally.rough_in0.empty()) {
+    md << "| normals_0 (fine, noisy) | " << mean(tally.rough_in0) << " | "
+       << tally.valid0 / tally.rough_in0.size() << " |\n";
+  }
+  if (!tally.rough_in1.empty()) {
+    md << "| normals_1 (coarse, smooth; its own resolution) | "
+       << mean(tally.rough_in1) << " | "
+       << tally.valid1 / tally.rough_in1.size() << " |\n";
+  }
+  md << "| fused | " << mean(tally.rough_out) << " | 1 |\n";
+  if (!tally.psnr_out.empty()) {
+    md << "\n## Accuracy against the ground truth\n\n"
+       << "| map | PSNR (dB) | mean angular error (deg) |\n|---|---|---|\n";
+    if (!tally.psnr_in0.empty()) {
+      md << "| normals_0 | " << mean(tally.psnr_in0) << " | "
+         << mean(tally.angle_in0) << " |\n";
+    }
+    md << "| fused | " << mean(tally.psnr_out) << " | " << mean(tally.angle_out)
+       << " |\n";
+  }
+  md << "\n## Pictures\n\n"
+     << "`frames/frame_NNN.png`: image, normals_0, normals_1 (upsampled "
+        "for display), fused; colour c = (n + 1) / 2 * 255 with x -> R, "
+        "y -> G, z -> B, black = missing.\n\n"
+     << "![first frame](first_frame.png)\n";
+  md << "\n## Per frame\n\n" << tally.table.str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options options;
+  if (!parseOptions(argc, argv, options)) return 2;
+  if (options.input.empty() || options.fused_path.empty() ||
+      options.dir.empty()) {
     std::fputs(kUsage, stderr);
     return 2;
   }
   ros::Time::init();
   try {
-    const Stamped images = readImages(input, "/image");
-    const Stamped normals0 = readImages(input, "/normals_0");
-    const Stamped normals1 = readImages(input, "/normals_1");
-    const Stamped fused = readImages(fused_path, "/fused_normals");
-    const auto stats = readStats(fused_path);
-    const Stamped fused_offline =
-        offline.empty() ? Stamped() : readImages(offline, "/fused_normals");
-    const Stamped gt = ground_truth.empty()
-                           ? Stamped()
-                           : readImages(ground_truth, "/normals_gt");
-    mkdir(dir.c_str(), 0755);
-    mkdir((dir + "/frames").c_str(), 0755);
+    const Bags bags = readBags(options);
+    mkdir(options.dir.c_str(), 0755);
+    mkdir((options.dir + "/frames").c_str(), 0755);
 
-    std::ostringstream table;
-    table << "| frame | stamp (s) | inputs | outer | inner | warm | solve (ms) "
-             "| latency (ms) | E start | E end | dropped so far |\n"
-          << "|---|---|---|---|---|---|---|---|---|---|---|\n";
-    std::vector<double> rough_in0, rough_in1, rough_out, solve, latency, inner,
-        offline_diff, psnr_in0, psnr_in1, psnr_out, angle_in0, angle_in1,
-        angle_out;
-    double valid0 = 0, valid1 = 0;
-    int index = 0, warm = 0;
-    std::uint64_t dropped = 0, skipped = 0;
-    for (const auto& [stamp, fused_msg] : fused) {
+    Tally tally;
+    tally.table << "| frame | stamp (s) | inputs | outer | inner | warm | "
+                   "solve (ms) | latency (ms) | E start | E end | dropped so "
+                   "far |\n"
+                << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    int index = 0;
+    for (const auto& [stamp, fused_msg] : bags.fused) {
       const nf::NormalMap out = normalsOf(*fused_msg);
-      const auto st = stats.count(stamp) ? stats.at(stamp) : nullptr;
-      const int W = out.width(), H = out.height();
-      std::vector<cv::Mat> tiles;
-      if (images.count(stamp)) {
-        tiles.push_back(labelled(imagePicture(*images.at(stamp)), "image"));
-      }
-      nf::NormalMap in0, in1;
-      if (normals0.count(stamp)) {
-        in0 = normalsOf(*normals0.at(stamp));
-        tiles.push_back(labelled(picture(in0, W, H), "normals_0 (fine)"));
-        rough_in0.push_back(roughnessDeg(in0));
-        valid0 += validShare(in0);
-      }
-      if (normals1.count(stamp)) {
-        in1 = normalsOf(*normals1.at(stamp));
-        tiles.push_back(labelled(picture(in1, W, H), "normals_1 (coarse)"));
-        rough_in1.push_back(roughnessDeg(in1));
-        valid1 += validShare(in1);
-      }
-      tiles.push_back(labelled(picture(out, W, H), "fused"));
-      rough_out.push_back(roughnessDeg(out));
-      cv::Mat row;
-      cv::hconcat(tiles, row);
-      char name[64];
-      std::snprintf(name, sizeof(name), "/frames/frame_%03d.png", index);
-      cv::imwrite(dir + name, row);
-      if (index == 0) cv::imwrite(dir + "/first_frame.png", row);
-
-      if (fused_offline.count(stamp)) {
-        const nf::NormalMap other = normalsOf(*fused_offline.at(stamp));
-        double worst = 0.0;
-        for (int c = 0; c < 3; ++c) {
-          for (std::size_t i = 0; i < out.pixelCount(); ++i) {
-            worst = std::max(worst, static_cast<double>(std::abs(
-                                        out.plane(c)[i] - other.plane(c)[i])));
-          }
-        }
-        offline_diff.push_back(worst);
-      }
-      if (gt.count(stamp)) {
-        const nf::NormalMap truth = normalsOf(*gt.at(stamp));
-        psnr_out.push_back(nf::psnr(out, truth));
-        angle_out.push_back(nf::angularError(out, truth).mean_deg);
-        if (!in0.empty() && in0.sameSize(truth)) {
-          psnr_in0.push_back(nf::psnr(in0, truth));
-          angle_in0.push_back(nf::angularError(in0, truth).mean_deg);
-        }
-      }
-      table << "| " << index << " | " << stamp.toSec() << " | ";
-      if (st) {
-        std::string present;
-        for (std::size_t i = 0; i < st->inputs_present.size(); ++i) {
-          present += st->inputs_present[i] ? std::to_string(i) : "-";
-        }
-        table << present << " | " << st->outer_iterations << " | "
-              << st->inner_iterations + st->coarse_inner_iterations << " | "
-              << (st->warm_started ? "yes" : "no") << " | "
-              << 1e3 * st->solve_time << " | " << 1e3 * st->latency << " | "
-              << st->initial_energy << " | " << st->final_energy << " | "
-              << st->frames_dropped << " |\n";
-        solve.push_back(st->solve_time);
-        latency.push_back(st->latency);
-        inner.push_back(st->inner_iterations + st->coarse_inner_iterations);
-        warm += st->warm_started;
-        dropped = std::max<std::uint64_t>(dropped, st->frames_dropped);
-        skipped = std::max<std::uint64_t>(skipped, st->frames_skipped);
-      } else {
-        table << "(no stats) | | | | | | | | |\n";
-      }
+      const auto inputs =
+          writeFramePicture(bags, stamp, out, index, options.dir, tally);
+      compareFrame(bags, stamp, out, inputs.first, tally);
+      addStatsRow(bags.stats.count(stamp) ? bags.stats.at(stamp) : nullptr,
+                  index, stamp, tally);
       ++index;
     }
     const int frames = index;
-    std::ofstream md(dir + "/summary.md");
-    md << "# " << title << "\n\n";
-    md << "- input bag: `" << input << "` (" << images.size() << " images, "
-       << normals0.size() << " maps on /normals_0, " << normals1.size()
-       << " on /normals_1)\n";
-    md << "- fused by the nodelet (bag.launch): `" << fused_path
-       << "`: " << frames << " fused frames, " << warm << " warm-started, "
-       << dropped << " dropped (worker busy), " << skipped
-       << " skipped (bad input)\n";
-    md << "- solve time per frame: mean " << 1e3 * mean(solve)
-       << " ms; latency (set complete -> outputs ready): mean "
-       << 1e3 * mean(latency) << " ms; inner iterations per frame: mean "
-       << mean(inner) << "\n";
-    if (!offline.empty()) {
-      md << "- the same bag through `fuse_bag` (`" << offline
-         << "`): " << fused_offline.size() << " frames; " << offline_diff.size()
-         << " frames in both; largest difference of a normal component: "
-         << (offline_diff.empty()
-                 ? 0.0
-                 : *std::max_element(offline_diff.begin(), offline_diff.end()))
-         << "\n";
-    }
-    md << "\n## Maps\n\n"
-       << "Roughness = mean angle between neighbouring normals (degrees; "
-          "lower is smoother); valid = share of pixels with a normal.\n\n"
-       << "| map | roughness (deg) | valid |\n|---|---|---|\n";
-    if (!rough_in0.empty()) {
-      md << "| normals_0 (fine, noisy) | " << mean(rough_in0) << " | "
-         << valid0 / rough_in0.size() << " |\n";
-    }
-    if (!rough_in1.empty()) {
-      md << "| normals_1 (coarse, smooth; its own resolution) | "
-         << mean(rough_in1) << " | " << valid1 / rough_in1.size() << " |\n";
-    }
-    md << "| fused | " << mean(rough_out) << " | 1 |\n";
-    if (!psnr_out.empty()) {
-      md << "\n## Accuracy against the ground truth\n\n"
-         << "| map | PSNR (dB) | mean angular error (deg) |\n|---|---|---|\n";
-      if (!psnr_in0.empty()) {
-        md << "| normals_0 | " << mean(psnr_in0) << " | " << mean(angle_in0)
-           << " |\n";
-      }
-      md << "| fused | " << mean(psnr_out) << " | " << mean(angle_out)
-         << " |\n";
-    }
-    md << "\n## Pictures\n\n"
-       << "`frames/frame_NNN.png`: image, normals_0, normals_1 (upsampled "
-          "for display), fused; colour c = (n + 1) / 2 * 255 with x -> R, "
-          "y -> G, z -> B, black = missing.\n\n"
-       << "![first frame](first_frame.png)\n";
-    md << "\n## Per frame\n\n" << table.str();
+    writeSummary(options, bags, tally, frames);
     std::printf("bag_report: %d frames -> %s/summary.md, %s/frames/\n", frames,
-                dir.c_str(), dir.c_str());
+                options.dir.c_str(), options.dir.c_str());
     return frames > 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bag_report: %s\n", e.what());

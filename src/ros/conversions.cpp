@@ -226,6 +226,91 @@ void imageFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
   }
 }
 
+namespace {
+
+/// What decoding a normal map found, for the errors after it.
+struct DecodeCounts {
+  long valid = 0, non_unit = 0, infinite = 0;
+  int first_x = -1, first_y = -1;  ///< the first non-unit normal
+  float first_length = 0.0f;
+};
+
+/// Decodes one row of a 32FC3 map: NaN = missing, unit length within the
+/// tolerance normalized exactly, infinite or non-unit values counted.
+void decodeFloatRow(const float* row, int W, int y, double unit_tolerance,
+                    float* nx, float* ny, float* nz, DecodeCounts& counts) {
+  for (int x = 0; x < W; ++x) {
+    const float v[3] = {row[3 * x], row[3 * x + 1], row[3 * x + 2]};
+    float out[3] = {kNaN, kNaN, kNaN};
+    if (std::isinf(v[0]) || std::isinf(v[1]) || std::isinf(v[2])) {
+      ++counts.infinite;
+    } else if (isValidNormal(v[0], v[1], v[2])) {
+      const float length = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      if (std::abs(length - 1.0f) > unit_tolerance) {
+        if (counts.non_unit++ == 0) {
+          counts.first_x = x;
+          counts.first_y = y;
+          counts.first_length = length;
+        }
+      } else {
+        // Unit length within the tolerance: normalize exactly.
+        for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
+        ++counts.valid;
+      }
+    }
+    nx[x] = out[0];
+    ny[x] = out[1];
+    nz[x] = out[2];
+  }
+}
+
+/// Decodes one row of a colour-coded 8-bit map: black = missing.
+void decodeByteRow(const std::uint8_t* row, int W, const EncodingInfo& info,
+                   float* nx, float* ny, float* nz, DecodeCounts& counts) {
+  for (int x = 0; x < W; ++x) {
+    const std::uint8_t* p = row + x * info.channels;
+    const int r = p[info.r], g = p[info.g], b = p[info.b];
+    float out[3] = {kNaN, kNaN, kNaN};
+    if (r != 0 || g != 0 || b != 0) {
+      // Decode n = c / 255 * 2 - 1, then normalize.
+      const float v[3] = {r * (2.0f / 255.0f) - 1.0f,
+                          g * (2.0f / 255.0f) - 1.0f,
+                          b * (2.0f / 255.0f) - 1.0f};
+      const float length = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      if (length > 1e-3f) {
+        for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
+        ++counts.valid;
+      }
+    }
+    nx[x] = out[0];
+    ny[x] = out[1];
+    nz[x] = out[2];
+  }
+}
+
+void throwOnDecodeProblems(const DecodeCounts& counts, int W, int H,
+                           double unit_tolerance, const std::string& topic) {
+  if (counts.infinite > 0) {
+    throw InputError(topic + ": " + std::to_string(counts.infinite) +
+                     " pixels hold infinite values; expected finite x, y, z "
+                     "(NaN = missing)");
+  }
+  if (counts.non_unit > 0) {
+    std::ostringstream text;
+    text << topic << ": " << counts.non_unit << " of " << W * H
+         << " normals are not unit vectors (|n| = " << counts.first_length
+         << " at (" << counts.first_x << ", " << counts.first_y
+         << ")); expected |n| within 1 +- " << unit_tolerance;
+    throw InputError(text.str());
+  }
+  if (counts.valid == 0) {
+    throw InputError(topic + ": no valid normal in the " + sizeText(W, H) +
+                     " map (all NaN or zero); expected at least one");
+  }
+}
+
+}  // namespace
+
 void normalsFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
                         double unit_tolerance, NormalMap& normals) {
   requireEncoding(msg, topic,
@@ -235,81 +320,20 @@ void normalsFromMessage(const sensor_msgs::Image& msg, const std::string& topic,
   lookupEncoding(msg.encoding, &info);
   const int W = static_cast<int>(msg.width), H = static_cast<int>(msg.height);
   normals.resize(W, H, 3);
-  float* nx = normals.plane(0);
-  float* ny = normals.plane(1);
-  float* nz = normals.plane(2);
-  long valid = 0, non_unit = 0, infinite = 0;
-  int first_x = -1, first_y = -1;
-  float first_length = 0.0f;
+  DecodeCounts counts;
   for (int y = 0; y < H; ++y) {
     const std::size_t row_start = static_cast<std::size_t>(y) * W;
+    float* nx = normals.plane(0) + row_start;
+    float* ny = normals.plane(1) + row_start;
+    float* nz = normals.plane(2) + row_start;
     if (info.is_float) {
-      const float* row = view.ptr<float>(y);
-      for (int x = 0; x < W; ++x) {
-        const float v[3] = {row[3 * x], row[3 * x + 1], row[3 * x + 2]};
-        float out[3] = {kNaN, kNaN, kNaN};
-        if (std::isinf(v[0]) || std::isinf(v[1]) || std::isinf(v[2])) {
-          ++infinite;
-        } else if (isValidNormal(v[0], v[1], v[2])) {
-          const float length =
-              std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-          if (std::abs(length - 1.0f) > unit_tolerance) {
-            if (non_unit++ == 0) {
-              first_x = x;
-              first_y = y;
-              first_length = length;
-            }
-          } else {
-            // Unit length within the tolerance: normalize exactly.
-            for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
-            ++valid;
-          }
-        }
-        nx[row_start + x] = out[0];
-        ny[row_start + x] = out[1];
-        nz[row_start + x] = out[2];
-      }
+      decodeFloatRow(view.ptr<float>(y), W, y, unit_tolerance, nx, ny, nz,
+                     counts);
     } else {
-      const std::uint8_t* row = view.ptr<std::uint8_t>(y);
-      for (int x = 0; x < W; ++x) {
-        const std::uint8_t* p = row + x * info.channels;
-        const int r = p[info.r], g = p[info.g], b = p[info.b];
-        float out[3] = {kNaN, kNaN, kNaN};
-        if (r != 0 || g != 0 || b != 0) {
-          // Decode n = c / 255 * 2 - 1, then normalize.
-          const float v[3] = {r * (2.0f / 255.0f) - 1.0f,
-                              g * (2.0f / 255.0f) - 1.0f,
-                              b * (2.0f / 255.0f) - 1.0f};
-          const float length =
-              std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-          if (length > 1e-3f) {
-            for (int c = 0; c < 3; ++c) out[c] = v[c] / length;
-            ++valid;
-          }
-        }
-        nx[row_start + x] = out[0];
-        ny[row_start + x] = out[1];
-        nz[row_start + x] = out[2];
-      }
+      decodeByteRow(view.ptr<std::uint8_t>(y), W, info, nx, ny, nz, counts);
     }
   }
-  if (infinite > 0) {
-    throw InputError(topic + ": " + std::to_string(infinite) +
-                     " pixels hold infinite values; expected finite x, y, z "
-                     "(NaN = missing)");
-  }
-  if (non_unit > 0) {
-    std::ostringstream text;
-    text << topic << ": " << non_unit << " of " << W * H
-         << " normals are not unit vectors (|n| = " << first_length << " at ("
-         << first_x << ", " << first_y << ")); expected |n| within 1 +- "
-         << unit_tolerance;
-    throw InputError(text.str());
-  }
-  if (valid == 0) {
-    throw InputError(topic + ": no valid normal in the " + sizeText(W, H) +
-                     " map (all NaN or zero); expected at least one");
-  }
+  throwOnDecodeProblems(counts, W, H, unit_tolerance, topic);
 }
 
 void confidenceFromMessage(const sensor_msgs::Image& msg,
@@ -412,170 +436,6 @@ CameraIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& msg,
   CameraIntrinsics K;
   for (int i = 0; i < 9; ++i) K.K[i] = msg.K[i];
   return K;
-}
-
-namespace {
-
-/// The source samples around target pixel `t` along one axis (scale = source
-/// size / target size, n = source size): the source coordinate of the target
-/// pixel's centre, scale (t + 0.5) - 0.5 clamped to [0, n - 1], split into
-/// the neighbours i0, i1 and the fraction f towards i1.
-struct Bracket {
-  double coordinate;
-  int i0, i1;
-  float f;
-};
-inline Bracket bracket(double scale, int t, int n) {
-  const double c = std::min(std::max(scale * (t + 0.5) - 0.5, 0.0), n - 1.0);
-  const int i0 = static_cast<int>(c);
-  return {c, i0, std::min(i0 + 1, n - 1), static_cast<float>(c - i0)};
-}
-
-/// Bilinear resampling of a normal map, branch-free: the source copied with
-/// its invalid normals zeroed plus a 0/1 validity plane (`masked`, 4
-/// planes), then each target pixel the bilinear sum of its four neighbours
-/// (an invalid one adds exact zeros, as if skipped), renormalized, NaN where
-/// no neighbour with weight is valid.
-void resampleNormalsBilinear(const PlanarImage& source, double sx, double sy,
-                             PlanarImage& target, int threads,
-                             PlanarImage* scratch) {
-  const int w = source.width(), h = source.height();
-  const int width = target.width(), height = target.height();
-  PlanarImage local;
-  PlanarImage& masked = scratch != nullptr ? *scratch : local;
-  masked.resize(w, h, 4);
-  const std::size_t n = source.pixelCount();
-  for (std::size_t i = 0; i < n; ++i) {
-    const float x = source.plane(0)[i], y = source.plane(1)[i],
-                z = source.plane(2)[i];
-    const bool ok = isValidNormal(x, y, z);
-    masked.plane(0)[i] = ok ? x : 0.0f;
-    masked.plane(1)[i] = ok ? y : 0.0f;
-    masked.plane(2)[i] = ok ? z : 0.0f;
-    masked.plane(3)[i] = ok ? 1.0f : 0.0f;
-  }
-  const float* mx = masked.plane(0);
-  const float* my = masked.plane(1);
-  const float* mz = masked.plane(2);
-  const float* mv = masked.plane(3);
-#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
-  for (int y = 0; y < height; ++y) {
-    const Bracket v = bracket(sy, y, h);
-    const float fy = v.f;
-    const std::size_t r0 = static_cast<std::size_t>(v.i0) * w;
-    const std::size_t r1 = static_cast<std::size_t>(v.i1) * w;
-    float* tx = target.plane(0) + static_cast<std::size_t>(y) * width;
-    float* ty = target.plane(1) + static_cast<std::size_t>(y) * width;
-    float* tz = target.plane(2) + static_cast<std::size_t>(y) * width;
-    for (int x = 0; x < width; ++x) {
-      const Bracket u = bracket(sx, x, w);
-      const float fx = u.f;
-      const std::size_t i[4] = {r0 + u.i0, r0 + u.i1, r1 + u.i0, r1 + u.i1};
-      const float wk[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
-                           fx * fy};
-      float ax = 0.0f, ay = 0.0f, az = 0.0f, total = 0.0f;
-      for (int k = 0; k < 4; ++k) {
-        ax += wk[k] * mx[i[k]];
-        ay += wk[k] * my[i[k]];
-        az += wk[k] * mz[i[k]];
-        total += wk[k] * mv[i[k]];
-      }
-      // Back to unit length (the weighted mean of unit vectors is shorter).
-      const float length = std::sqrt(ax * ax + ay * ay + az * az);
-      const bool ok = total > 1e-6f && length > 1e-6f;
-      tx[x] = ok ? ax / length : kNaN;
-      ty[x] = ok ? ay / length : kNaN;
-      tz[x] = ok ? az / length : kNaN;
-    }
-  }
-}
-
-}  // namespace
-
-void resampleMap(const PlanarImage& source, int width, int height,
-                 Resampling method, bool is_normal_map,
-                 const std::string& topic, PlanarImage& target, int threads,
-                 PlanarImage* scratch) {
-  const int w = source.width(), h = source.height(), C = source.channels();
-  // Same aspect ratio: (width / w) / (height / h) within 1 %.
-  const double ratio =
-      (static_cast<double>(width) * h) / (static_cast<double>(height) * w);
-  if (std::abs(ratio - 1.0) > 0.01) {
-    throw InputError(topic + ": a " + sizeText(w, h) +
-                     " map cannot be resampled to the image's " +
-                     sizeText(width, height) +
-                     ": expected the same aspect ratio");
-  }
-  target.resize(width, height, C);
-  const double sx = static_cast<double>(w) / width;
-  const double sy = static_cast<double>(h) / height;
-  if (is_normal_map && method == Resampling::kBilinear && C == 3) {
-    resampleNormalsBilinear(source, sx, sy, target, threads, scratch);
-    return;
-  }
-  const std::size_t source_pixels = source.pixelCount();
-  auto valid = [&](std::size_t i) {
-    if (is_normal_map) {
-      return isValidNormal(source.plane(0)[i], source.plane(1)[i],
-                           source.plane(2)[i]);
-    }
-    for (int c = 0; c < C; ++c) {
-      if (!std::isfinite(source.plane(c)[i])) return false;
-    }
-    return true;
-  };
-  // Rows in parallel: each target pixel is computed alone (same values on any
-  // thread count).
-#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
-  for (int y = 0; y < height; ++y) {
-    const Bracket v = bracket(sy, y, h);
-    for (int x = 0; x < width; ++x) {
-      const Bracket u = bracket(sx, x, w);
-      const std::size_t t = static_cast<std::size_t>(y) * width + x;
-      float acc[4] = {0, 0, 0, 0};
-      float total = 0.0f;
-      if (method == Resampling::kNearest) {
-        const std::size_t i =
-            static_cast<std::size_t>(std::lround(v.coordinate)) * w +
-            std::lround(u.coordinate);
-        if (valid(i)) {
-          for (int c = 0; c < C && c < 4; ++c) acc[c] = source.plane(c)[i];
-          total = 1.0f;
-        }
-      } else {
-        const float fx = u.f, fy = v.f;
-        const int xs[4] = {u.i0, u.i1, u.i0, u.i1};
-        const int ys[4] = {v.i0, v.i0, v.i1, v.i1};
-        const float ws[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
-                             fx * fy};
-        // Bilinear weights over the valid neighbours only.
-        for (int k = 0; k < 4; ++k) {
-          const std::size_t i = static_cast<std::size_t>(ys[k]) * w + xs[k];
-          if (ws[k] <= 0.0f || i >= source_pixels || !valid(i)) continue;
-          for (int c = 0; c < C && c < 4; ++c) {
-            acc[c] += ws[k] * source.plane(c)[i];
-          }
-          total += ws[k];
-        }
-      }
-      if (total <= 1e-6f) {
-        for (int c = 0; c < C; ++c) target.plane(c)[t] = kNaN;
-        continue;
-      }
-      if (is_normal_map) {
-        // Back to unit length (the weighted mean of unit vectors is shorter).
-        const float length =
-            std::sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]);
-        for (int c = 0; c < 3; ++c) {
-          target.plane(c)[t] = length > 1e-6f ? acc[c] / length : kNaN;
-        }
-      } else {
-        for (int c = 0; c < C && c < 4; ++c) {
-          target.plane(c)[t] = acc[c] / total;
-        }
-      }
-    }
-  }
 }
 
 void normalsToMessage(const NormalMap& normals, const std_msgs::Header& header,
