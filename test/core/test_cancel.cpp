@@ -209,7 +209,8 @@ TEST(Cancel, LocalRefinementEndsPromptlyOnRequest) {
 /// clear they compute the same bits as without one; set before the call,
 /// they return false at once with nothing changed; set by another thread
 /// during a run of about 3 s worth of iterations, they return false within
-/// the deadline of the request.
+/// the deadline of the request. Long because the four kernels share one
+/// prepared level and state, and each check reads best beside the others.
 TEST(Cancel, KernelsStopOnTheRequest) {
   const FusionProblem problem = cylinderWithHole(640, 480);
   const int W = 640, H = 480, L = 2;
