@@ -67,7 +67,8 @@ std::vector<StreamResult> runStreams(const Options& options) {
 Results runCases(const Options& options) {
   // Ground truth of every scene.
   std::vector<nf::synthetic::Frame> frames;
-  if (options.run_paper || options.run_depth || options.run_fusion) {
+  if (options.run_paper || options.run_depth || options.run_fusion ||
+      options.run_estimators) {
     for (int scene : options.scenes) {
       frames.push_back(
           nf::synthetic::renderScene(scene, options.width, options.height));
@@ -86,6 +87,9 @@ Results runCases(const Options& options) {
       std::cerr << "evaluate: castle case " << r.castle.note << "\n";
   }
   if (options.run_stream) r.streams = runStreams(options);
+  if (options.run_estimators) {
+    r.estimators = runEstimatorsCase(options, frames);
+  }
   r.all = r.paper;
   if (options.run_depth) r.all.push_back(r.depth);
   r.all.insert(r.all.end(), r.fusion.begin(), r.fusion.end());
