@@ -372,7 +372,7 @@ struct EstimatorTable {
 struct EstimatorsOutcome {
   std::vector<EstimatorTable> tables;
   std::string note;
-  Timer solver;  ///< its own, so that the other cases' solve times stay
+  Timer solver;  ///< apart from Results::timers, which the set-up reports
 };
 
 EstimatorsOutcome runEstimatorsCase(
