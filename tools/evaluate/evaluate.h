@@ -66,6 +66,7 @@ struct Options {
   bool run_fusion = true;
   bool run_castle = true;
   bool run_stream = true;
+  bool run_estimators = true;  ///< depth-to-normals estimators (with rgbd)
   // Depth-camera noise (depth and castle cases, depth input of the fusion).
   double depth_sigma_at_1m = 0.0015;
   double depth_dropout = 0.02;
@@ -350,6 +351,34 @@ std::string streamTable(const StreamResult& r);
 void writeStreamPlot(const std::string& path, const StreamResult& r,
                      const Options& options);
 
+// --- case_depth_estimators.cpp
+
+/// One row of a depth-estimators table: an estimator and one way of making
+/// normals of its own.
+struct EstimatorRow {
+  std::string estimator;  ///< "plane_fit", "OpenCV FALS", ...
+  std::string use;        ///< "own normals", "regularizer", ...
+  std::string setting;    ///< the fast global smoother's best setting
+  Score mean;             ///< mean over the data set's scenes
+};
+
+/// One data set's table.
+struct EstimatorTable {
+  std::string title;
+  std::vector<EstimatorRow> rows;
+};
+
+/// The depth-estimators case: a table per data set, and why one is missing.
+struct EstimatorsOutcome {
+  std::vector<EstimatorTable> tables;
+  std::string note;
+  Timer solver;  ///< apart from Results::timers, which the set-up reports
+};
+
+EstimatorsOutcome runEstimatorsCase(
+    const Options& options, const std::vector<nf::synthetic::Frame>& frames);
+std::string estimatorsTable(const EstimatorTable& table);
+
 // --- report.cpp: tables and CSV files
 
 const Row& bilateralRow(const CaseResult& r);
@@ -385,6 +414,7 @@ struct Results {
   CaseResult depth;
   CastleOutcome castle;
   std::vector<StreamResult> streams;
+  EstimatorsOutcome estimators;
   std::vector<CaseResult> all;  ///< every case with tables, in report order
   /// The paper's claim: the sigmas where the regularizer is not ahead of the
   /// best bilateral filter.

@@ -3,7 +3,8 @@
 // ximgproc: joint bilateral, guided, fast global smoother, domain transform),
 // each filter at its best setting of a small grid for each case.
 //
-//   evaluate --output-dir DIR [--cases paper,depth,fusion,castle,stream]
+//   evaluate --output-dir DIR
+//            [--cases paper,depth,fusion,castle,stream,estimators]
 //            [--width 320 --height 240] [--scenes 0,1,2] [--quick]
 //            [solver options]
 //
@@ -14,7 +15,10 @@
 // depth-camera noise, ground truth from its piecewise-planar model) and
 // "stream" (consecutive frames of a moving camera, new noise in each: each
 // frame solved alone, the warm-started stream, and both on the inputs
-// averaged over time; a synthetic sequence and Castle's frames).
+// averaged over time; a synthetic sequence and Castle's frames), and
+// "estimators" (depth-to-normals: the library's methods and OpenCV's
+// RgbdNormals on the depth case's and the castle case's noisy depth, alone,
+// regularized and smoothed by the fast global smoother).
 //
 // Writes DIR/results.md (the tables, also printed to stdout),
 // DIR/results.csv (per scene), DIR/filter_grid.csv (every filter setting),
@@ -27,9 +31,9 @@
 //
 // The parts: options.cpp (the command line), scores.cpp (scores and the
 // filters compared), case_runner.cpp (one case over its scenes and the grid
-// search), cases_synthetic.cpp, case_castle.cpp and case_stream.cpp (the
-// cases), report.cpp and markdown.cpp (tables, CSV, results.md),
-// pictures.cpp (plot and example pictures).
+// search), cases_synthetic.cpp, case_castle.cpp, case_stream.cpp and
+// case_depth_estimators.cpp (the cases), report.cpp and markdown.cpp (tables,
+// CSV, results.md), pictures.cpp (plot and example pictures).
 #include <chrono>
 #include <exception>
 #include <filesystem>
@@ -67,7 +71,8 @@ std::vector<StreamResult> runStreams(const Options& options) {
 Results runCases(const Options& options) {
   // Ground truth of every scene.
   std::vector<nf::synthetic::Frame> frames;
-  if (options.run_paper || options.run_depth || options.run_fusion) {
+  if (options.run_paper || options.run_depth || options.run_fusion ||
+      options.run_estimators) {
     for (int scene : options.scenes) {
       frames.push_back(
           nf::synthetic::renderScene(scene, options.width, options.height));
@@ -86,6 +91,9 @@ Results runCases(const Options& options) {
       std::cerr << "evaluate: castle case " << r.castle.note << "\n";
   }
   if (options.run_stream) r.streams = runStreams(options);
+  if (options.run_estimators) {
+    r.estimators = runEstimatorsCase(options, frames);
+  }
   r.all = r.paper;
   if (options.run_depth) r.all.push_back(r.depth);
   r.all.insert(r.all.end(), r.fusion.begin(), r.fusion.end());

@@ -199,6 +199,38 @@ std::string streamsText(const Options& options, const Results& r) {
   return md.str();
 }
 
+/// Section 6: the depth-to-normals estimators.
+std::string estimatorsText(const Options& options, const Results& r) {
+  std::ostringstream md;
+  if (!options.run_estimators) return md.str();
+  md << "\n## 6. Depth-to-normals estimators: the library's and OpenCV's "
+        "RgbdNormals\n\n"
+     << "The same noisy depth maps as cases 2 and 4 ("
+     << depthNoiseText(options)
+     << ") to normals by each estimator at its defaults (central_difference "
+        "and plane_fit of normal_fusion/depth.h; OpenCV rgbd's FALS, LINEMOD "
+        "and SRI, window 5, turned to face the camera), scored on every "
+        "pixel with ground truth: the estimator's own normals, the "
+        "regularizer (the settings above, the image as guide) on them "
+        "without and, for the library's methods, with their confidence, and "
+        "the fast global smoother on them at its best setting of its grid "
+        "(by mean PSNR among the settings that give "
+     << percent(kMinProducedShare)
+     << " of the pixels a normal or more). 'with a normal': the share of "
+        "those pixels given one. Mean over the scenes; "
+     << fixed(r.estimators.solver.mean(), 3) << " s per solve ("
+     << r.estimators.solver.calls << " solves).\n";
+  for (std::size_t k = 0; k < r.estimators.tables.size(); ++k) {
+    const EstimatorTable& t = r.estimators.tables[k];
+    md << "\n### 6" << static_cast<char>('a' + k) << ". " << t.title << "\n\n"
+       << estimatorsTable(t);
+  }
+  if (!r.estimators.note.empty()) {
+    md << "\nNot shown: " << r.estimators.note << ".\n";
+  }
+  return md.str();
+}
+
 /// The summary against the peers and the list of files.
 std::string summaryText(const Results& r, const OutputFiles& files) {
   std::ostringstream md;
@@ -237,7 +269,7 @@ std::string markdown(const Options& options, const Results& results,
                      const OutputFiles& files, double total_seconds) {
   return setupText(options, results, total_seconds) + paperText(results) +
          casesText(options, results) + streamsText(options, results) +
-         summaryText(results, files);
+         estimatorsText(options, results) + summaryText(results, files);
 }
 
 }  // namespace evaluate

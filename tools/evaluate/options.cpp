@@ -67,7 +67,8 @@ struct GivenOptions {
 void parseCases(const std::string& option, const std::string& list,
                 Options* options) {
   options->run_paper = options->run_depth = options->run_fusion =
-      options->run_castle = options->run_stream = false;
+      options->run_castle = options->run_stream = options->run_estimators =
+          false;
   for (const std::string& item : splitCommas(option, list)) {
     if (item == "paper") {
       options->run_paper = true;
@@ -79,10 +80,12 @@ void parseCases(const std::string& option, const std::string& list,
       options->run_castle = true;
     } else if (item == "stream") {
       options->run_stream = true;
+    } else if (item == "estimators") {
+      options->run_estimators = true;
     } else {
       throw UsageError(option +
-                       ": expected paper, depth, fusion, castle or "
-                       "stream, got '" +
+                       ": expected paper, depth, fusion, castle, stream or "
+                       "estimators, got '" +
                        item + "'");
     }
   }
@@ -241,7 +244,9 @@ void printUsage(std::ostream& out) {
          "\n"
          "Experiment:\n"
          "  --output-dir DIR      where the results go (created if missing)\n"
-         "  --cases LIST          any of paper, depth, fusion, castle [all]\n"
+         "  --cases LIST          any of paper, depth, fusion, castle, "
+         "stream,\n"
+         "                        estimators [all]\n"
          "  --width N, --height N synthetic image size [320 x 240; 160 x 120 "
          "with --quick]\n"
          "  --scenes LIST         comma-separated scene ids in 0.."
@@ -257,6 +262,8 @@ void printUsage(std::ostream& out) {
       << o.seed
       << "]\n"
          "  --no-fusion           same as leaving fusion out of --cases\n"
+         "  --no-estimators       same as leaving estimators (the depth-to-\n"
+         "                        normals estimators) out of --cases\n"
          "  --depth-sigma X       depth noise at 1 m (metres, grows with z^2) ["
       << o.depth_sigma_at_1m << "]\n"
       << "  --depth-dropout X     share of missing depth pixels ["
@@ -318,12 +325,13 @@ Options parseArguments(int argc, char** argv) {
     }
     // Flags without a value.
     if (option == "--help" || option == "--no-edges" || option == "--quick" ||
-        option == "--no-fusion") {
+        option == "--no-fusion" || option == "--no-estimators") {
       if (has_inline_value) throw UsageError(option + " takes no value");
       if (option == "--help") options.help = true;
       if (option == "--no-edges") s.edges.enabled = false;
       if (option == "--quick") options.quick = true;
       if (option == "--no-fusion") options.run_fusion = false;
+      if (option == "--no-estimators") options.run_estimators = false;
       continue;
     }
     const ValueFn value = [&]() -> std::string {
