@@ -5,44 +5,24 @@
 // depend on the machine and its load, which are printed.
 //
 //   bench_depth_normals [--runs N] [--threads T] [--width W --height H]
-#include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "eval/synthetic.h"
 #include "normal_fusion/depth.h"
 #include "normal_fusion/metrics.h"
 
 namespace nf = normal_fusion;
 namespace nd = normal_fusion::depth;
+namespace nb = normal_fusion::bench;
 
 namespace {
-
-std::string cpuModel() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("model name", 0) == 0) {
-      const std::size_t colon = line.find(':');
-      if (colon != std::string::npos) return line.substr(colon + 2);
-    }
-  }
-  return "unknown";
-}
-
-std::string loadAverage() {
-  std::ifstream in("/proc/loadavg");
-  std::string a, b, c;
-  in >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
 
 struct Variant {
   const char* label;
@@ -63,11 +43,6 @@ std::vector<Variant> variants(int threads) {
     out.push_back({kLabels[r], s});
   }
   return out;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 double minimum(const std::vector<double>& v) {
@@ -117,19 +92,11 @@ void printTimings(const Options& o) {
     nf::ScalarMap confidence;
     double ms[2], best[2];
     for (int with_conf = 0; with_conf < 2; ++with_conf) {
-      std::vector<double> times;
-      // One warm-up run sizes the buffers.
-      estimator.compute(noisy, frame.K, normals,
-                        with_conf ? &confidence : nullptr);
-      for (int k = 0; k < o.runs; ++k) {
-        const auto start = std::chrono::steady_clock::now();
+      const std::vector<double> times = nb::timesMs(o.runs, [&] {
         estimator.compute(noisy, frame.K, normals,
                           with_conf ? &confidence : nullptr);
-        times.push_back(std::chrono::duration<double, std::milli>(
-                            std::chrono::steady_clock::now() - start)
-                            .count());
-      }
-      ms[with_conf] = median(times);
+      });
+      ms[with_conf] = nb::median(times);
       best[with_conf] = minimum(times);
     }
     std::printf("%-26s %14.2f %20.2f %10.2f %10.2f\n", v.label, ms[0], ms[1],
@@ -215,8 +182,7 @@ void printAccuracy(const Options& o) {
 int main(int argc, char** argv) {
   Options o;
   if (!parseOptions(argc, argv, o)) return 2;
-  std::printf("machine: %s, nproc %ld, load average %s\n", cpuModel().c_str(),
-              sysconf(_SC_NPROCESSORS_ONLN), loadAverage().c_str());
+  std::printf("%s\n", nb::machineLine().c_str());
   std::printf("frame %dx%d, %d thread(s), median of %d runs\n\n", o.width,
               o.height, o.threads, o.runs);
   printTimings(o);

@@ -8,17 +8,15 @@
 // timings depend on the machine and its load, which are printed.
 //
 //   bench_depth_peers [--runs N] [--width W --height H]
-#include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "eval/synthetic.h"
 #include "normal_fusion/depth.h"
 #ifdef NF_HAVE_RGBD
@@ -30,41 +28,13 @@
 
 namespace nf = normal_fusion;
 namespace nd = normal_fusion::depth;
+namespace nb = normal_fusion::bench;
 
 namespace {
 
-std::string cpuModel() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("model name", 0) == 0) {
-      const std::size_t colon = line.find(':');
-      if (colon != std::string::npos) return line.substr(colon + 2);
-    }
-  }
-  return "unknown";
-}
-
-std::string loadAverage() {
-  std::ifstream in("/proc/loadavg");
-  std::string a, b, c;
-  in >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
-
 /// Median milliseconds of `runs` calls of `work`, after one warm-up call.
 double medianMs(int runs, const std::function<void()>& work) {
-  work();
-  std::vector<double> times;
-  for (int k = 0; k < runs; ++k) {
-    const auto start = std::chrono::steady_clock::now();
-    work();
-    times.push_back(std::chrono::duration<double, std::milli>(
-                        std::chrono::steady_clock::now() - start)
-                        .count());
-  }
-  std::sort(times.begin(), times.end());
-  return times[times.size() / 2];
+  return nb::median(nb::timesMs(runs, work));
 }
 
 void libraryRows(int runs, const nf::ScalarMap& depth,
@@ -148,8 +118,7 @@ int main(int argc, char** argv) {
 #ifdef NF_HAVE_RGBD
   cv::setNumThreads(1);
 #endif
-  std::printf("machine: %s, nproc %ld, load average %s\n", cpuModel().c_str(),
-              sysconf(_SC_NPROCESSORS_ONLN), loadAverage().c_str());
+  std::printf("%s\n", nb::machineLine().c_str());
   std::printf("frame %dx%d, one thread, median of %d runs\n\n", width, height,
               runs);
   // Scene 2 with depth-camera noise and dropout (the content barely changes

@@ -7,14 +7,13 @@
 //
 // Run: bench_scaling [--iterations N] [--repetitions R] [--threads T]
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
 
-#include "eval/synthetic.h"
+#include "bench_util.h"
 #include "normal_fusion/solver.h"
 
 namespace nf = normal_fusion;
@@ -65,21 +64,6 @@ Options parseOptions(int argc, char** argv) {
   return options;
 }
 
-nf::FusionProblem makeProblem(const Size& size, int num_inputs) {
-  const nf::synthetic::Frame frame =
-      nf::synthetic::renderScene(0, size.width, size.height);
-  nf::FusionProblem problem;
-  problem.image = frame.image;
-  problem.K = frame.K;
-  for (int l = 0; l < num_inputs; ++l) {
-    nf::NormalInput input;
-    input.normals =
-        nf::synthetic::addPaperNoise(frame.normals_gt, 0.4, 100 + l);
-    problem.inputs.push_back(input);
-  }
-  return problem;
-}
-
 struct Row {
   double frame_ms = 0.0;
   double ns_per_pixel_iteration = 0.0;
@@ -95,22 +79,15 @@ Row measure(const Options& options, const Size& size, int num_inputs) {
   settings.max_total_inner_iterations = options.iterations;
   settings.relative_tolerance = 0.0;
   settings.pyramid_levels = 0;
-  const nf::FusionProblem problem = makeProblem(size, num_inputs);
+  const nf::FusionProblem problem =
+      nf::bench::paperNoiseProblem(size.width, size.height, num_inputs);
   nf::Solver solver(settings);
   nf::SolverState state;
   nf::SolveReport report;
-  solver.solve(problem, state, false, report);  // sizes every buffer
-  std::vector<double> times_ms;
-  for (int r = 0; r < options.repetitions; ++r) {
-    const auto start = std::chrono::steady_clock::now();
-    solver.solve(problem, state, false, report);
-    const auto end = std::chrono::steady_clock::now();
-    times_ms.push_back(
-        std::chrono::duration<double, std::milli>(end - start).count());
-  }
-  std::sort(times_ms.begin(), times_ms.end());
   Row row;
-  row.frame_ms = times_ms[times_ms.size() / 2];
+  row.frame_ms = nf::bench::median(nf::bench::timesMs(options.repetitions, [&] {
+    solver.solve(problem, state, false, report);
+  }));
   row.iterations = report.inner_iterations;
   const double pixels = static_cast<double>(size.width) * size.height;
   row.ns_per_pixel_iteration =

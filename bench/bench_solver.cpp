@@ -3,12 +3,13 @@
 //    640x480 (counter "pixel_iter_per_s"), inner iterations only.
 //  - BM_PaperWorkload/<threads>: the paper's workload, 640x480, L = 1, 1000
 //    inner iterations in total (20 outer x 50 inner), wall time of one solve.
-// Run: bench_solver --benchmark_min_time=2 (see docs/performance.md for recorded figures).
+// Run: bench_solver --benchmark_min_time=2 (see docs/performance.md for
+// recorded figures).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 
-#include "eval/synthetic.h"
+#include "bench_util.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
 
@@ -19,28 +20,14 @@ namespace {
 constexpr int kWidth = 640;
 constexpr int kHeight = 480;
 
-nf::FusionProblem makeProblem(int num_inputs) {
-  const nf::synthetic::Frame frame =
-      nf::synthetic::renderScene(0, kWidth, kHeight);
-  nf::FusionProblem problem;
-  problem.image = frame.image;
-  problem.K = frame.K;
-  for (int l = 0; l < num_inputs; ++l) {
-    nf::NormalInput input;
-    input.normals =
-        nf::synthetic::addPaperNoise(frame.normals_gt, 0.4, 100 + l);
-    problem.inputs.push_back(input);
-  }
-  return problem;
-}
-
 /// Inner iterations alone: args = {backend (0 fast, 1 reference), L, threads}.
 void BM_InnerIterations(benchmark::State& state) {
   const bool reference = state.range(0) == 1;
   const int L = static_cast<int>(state.range(1));
   const int threads = static_cast<int>(state.range(2));
   nf::SolverSettings settings;
-  const nf::FusionProblem problem = makeProblem(L);
+  const nf::FusionProblem problem =
+      nf::bench::paperNoiseProblem(kWidth, kHeight, L);
   const nf::internal::PreparedLevel level =
       nf::internal::prepareFinest(problem, settings);
   nf::internal::InnerParams params;
@@ -85,7 +72,8 @@ void BM_PaperWorkload(benchmark::State& state) {
   settings.max_total_inner_iterations = 1000;
   settings.relative_tolerance = 0.0;
   settings.pyramid_levels = 1;
-  const nf::FusionProblem problem = makeProblem(1);
+  const nf::FusionProblem problem =
+      nf::bench::paperNoiseProblem(kWidth, kHeight, 1);
   nf::Solver solver(settings);
   nf::SolverState solver_state;
   for (auto _ : state) {
