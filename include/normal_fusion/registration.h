@@ -24,8 +24,16 @@
 //     identity (k2x2 is not: a pixel also gets its neighbours' points).
 // Colour pixels that no depth pixel reaches are unknown: NaN normal, 0
 // confidence, NaN depth. The confidence shown is the depth pixel's, not
-// re-weighted for the colour camera's view. No lens distortion is modelled
-// (rectified images).
+// re-weighted for the colour camera's view.
+//
+// Lens distortion (lens_distortion.h): a camera's `distortion` is undone
+// when the depth pixels are back-projected (each pixel's ray undistorted once
+// and kept while the depth camera stays the same) and applied when the points
+// are projected into the colour image; points beyond the colour image's
+// undistorted border are dropped, and a model that folds back inside it is
+// refused. The normals themselves are computed by depth.h on the depth pixels
+// as a pinhole camera would: a rectified depth image (the usual case) needs
+// nothing more.
 #pragma once
 
 #include <array>
@@ -33,6 +41,7 @@
 #include <vector>
 
 #include "normal_fusion/geometry.h"
+#include "normal_fusion/lens_distortion.h"
 #include "normal_fusion/types.h"
 
 namespace normal_fusion {
@@ -58,11 +67,18 @@ struct RegistrationSettings {
   bool face_camera = true;
 };
 
-/// The colour camera: intrinsics (pinhole, no skew) and image size.
+/// A camera of the registration: intrinsics (pinhole, no skew), image size
+/// and lens distortion (none by default).
 struct TargetCamera {
+  TargetCamera() = default;
+  TargetCamera(const CameraIntrinsics& K_, int width_, int height_,
+               const LensDistortion& distortion_ = LensDistortion())
+      : K(K_), width(width_), height(height_), distortion(distortion_) {}
+
   CameraIntrinsics K;
   int width = 0;
   int height = 0;
+  LensDistortion distortion;
 };
 
 /// Registers depth-camera normals into a colour camera; keeps its z-buffer
@@ -94,15 +110,34 @@ class DepthRegistration {
                        NormalMap& normals_rgb, ScalarMap* confidence_rgb,
                        ScalarMap* depth_rgb = nullptr);
 
+  /// The same with the depth camera's distortion: `depth_camera` has the
+  /// depth map's size. Throws InputError as above, and for a distortion that
+  /// cannot be inverted at a depth pixel or folds back inside the colour
+  /// image.
+  void registerNormals(const ScalarMap& depth_m, const NormalMap& normals_depth,
+                       const ScalarMap* confidence_depth,
+                       const TargetCamera& depth_camera,
+                       const TargetCamera& rgb,
+                       const RigidTransform& T_rgb_depth,
+                       NormalMap& normals_rgb, ScalarMap* confidence_rgb,
+                       ScalarMap* depth_rgb = nullptr);
+
  private:
   void check(const ScalarMap& depth_m, const NormalMap& normals_depth,
              const ScalarMap* confidence_depth, const CameraIntrinsics& K_depth,
              const TargetCamera& rgb, const RigidTransform& T_rgb_depth,
              const ScalarMap* confidence_rgb) const;
 
+  /// Fills rays_ for the depth camera unless it is the one they are for.
+  void prepareRays(const TargetCamera& depth_camera);
+
   RegistrationSettings settings_;
-  ScalarMap zbuffer_;          ///< z_rgb of the surface shown per colour pixel
-  std::vector<double> ray_x_;  ///< (u - cx) / fx per depth column
+  ScalarMap zbuffer_;  ///< z_rgb of the surface shown per colour pixel
+  /// The first two entries of each depth pixel's ray (x, y at z = 1),
+  /// undistorted; NaN where the distortion cannot be inverted.
+  std::vector<double> rays_;
+  TargetCamera rays_camera_;  ///< the depth camera rays_ belong to
+  bool rays_valid_ = false;
 };
 
 /// One-shot form of DepthRegistration::registerNormals.

@@ -392,6 +392,10 @@ DepthToNormalsNodelet::Work DepthToNormalsNodelet::checkedWork(
   work.K = intrinsicsFromCameraInfo(info_msg, topic_names_[kCameraInfo],
                                     static_cast<int>(msg.width),
                                     static_cast<int>(msg.height));
+  if (settings_.register_to_rgb) {
+    work.depth_distortion = LensDistortion::fromCameraInfo(
+        info_msg.distortion_model, info_msg.D, topic_names_[kCameraInfo]);
+  }
   return work;
 }
 
@@ -454,7 +458,9 @@ void DepthToNormalsNodelet::addColourCamera(
                      "'; expected both optical frames for the registration");
   }
   work.rgb_info = rgb_info;
-  work.rgb = depth::TargetCamera{K_rgb, width, height};
+  work.rgb = depth::TargetCamera{
+      K_rgb, width, height,
+      LensDistortion::fromCameraInfo(info.distortion_model, info.D, name)};
 }
 
 depth::RigidTransform DepthToNormalsNodelet::lookupRgbFromDepth(
@@ -521,11 +527,13 @@ void DepthToNormalsNodelet::publishRegistered(
     const Work& work, const depth::RigidTransform& T_rgb_depth,
     bool want_normals, bool want_confidence, bool want_depth) {
   try {
-    registration_.registerNormals(depth_m_, normals_,
-                                  want_confidence ? &confidence_ : nullptr,
-                                  work.K, work.rgb, T_rgb_depth, normals_rgb_,
-                                  want_confidence ? &confidence_rgb_ : nullptr,
-                                  want_depth ? &depth_rgb_ : nullptr);
+    const depth::TargetCamera depth_camera{
+        work.K, depth_m_.width(), depth_m_.height(), work.depth_distortion};
+    registration_.registerNormals(
+        depth_m_, normals_, want_confidence ? &confidence_ : nullptr,
+        depth_camera, work.rgb, T_rgb_depth, normals_rgb_,
+        want_confidence ? &confidence_rgb_ : nullptr,
+        want_depth ? &depth_rgb_ : nullptr);
   } catch (const Error& e) {
     throw InputError(topic_names_[kDepth] + ": registration: " + e.what());
   }

@@ -92,6 +92,8 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
   struct Work {
     sensor_msgs::ImageConstPtr depth;
     CameraIntrinsics K;
+    /// The depth camera's distortion (read when registering).
+    LensDistortion depth_distortion;
     sensor_msgs::CameraInfoConstPtr rgb_info;
     depth::TargetCamera rgb;
   };
