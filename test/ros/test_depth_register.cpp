@@ -3,8 +3,9 @@
 // transform from tf. Without the transform: an error naming both frames, no
 // output, and the next frame answered once tf has it; with it: normals in
 // the colour frame, at the colour size, equal to the plane's normal there;
-// bad colour camera_infos skipped with an error; a colour camera_info of the
-// depth's frame and size: nothing registered.
+// bad colour camera_infos (an unsupported lens model among them) skipped
+// with an error; a distorted colour camera registered through its model; a
+// colour camera_info of the depth's frame and size: nothing registered.
 // Under depth_register.test (the nodelet's own launch file) and
 // depth_register_rgbd.test (launch/rgbd.launch register:=true).
 #include <geometry_msgs/TransformStamped.h>
@@ -226,6 +227,16 @@ void expectBadColourInfosSkipped(Client& client) {
           {[](sensor_msgs::CameraInfo& i) { i.K.fill(0.0); }, "expected K"},
           {[](sensor_msgs::CameraInfo& i) { i.header.frame_id.clear(); },
            "expected both optical frames"},
+          {[](sensor_msgs::CameraInfo& i) {
+             i.distortion_model = "equidistant";
+             i.D = {0.1, 0.0, 0.0, 0.0};
+           },
+           "distortion model 'equidistant' is not supported"},
+          {[](sensor_msgs::CameraInfo& i) {
+             i.distortion_model = "plumb_bob";
+             i.D = {0.1, 0.0, 0.0, 0.0};
+           },
+           "with 4 coefficients; expected 5"},
       };
   for (const auto& c : bad) {
     const ros::Time bad_stamp = client.publish(false, c.first);
@@ -279,6 +290,22 @@ TEST(DepthRegister, WaitsForTfThenGivesNormalsInTheColourCamera) {
   EXPECT_LT(worst_deg, 0.1);
 
   expectBadColourInfosSkipped(client);
+
+  // A colour camera with lens distortion: registered through its model.
+  sensor_msgs::ImageConstPtr distorted;
+  for (int k = 0; k < 10 && !distorted; ++k) {
+    const ros::Time stamp =
+        client.publish(false, [](sensor_msgs::CameraInfo& i) {
+          i.distortion_model = "plumb_bob";
+          i.D = {0.08, -0.15, 0.001, -0.0005, 0.02};
+        });
+    waitFor([&] { return (distorted = client.normals(stamp)) != nullptr; },
+            1.0);
+  }
+  ASSERT_TRUE(distorted) << "no normals for a distorted colour camera";
+  EXPECT_GT(compareToNormal(*distorted, plane.n, &worst_deg),
+            kRgbWidth * kRgbHeight / 2);
+  EXPECT_LT(worst_deg, 0.1);
 
   // The same frame, the colour camera_info now the depth's own: nothing is
   // registered, the plane's normal is the depth camera's, R^T n_rgb.
