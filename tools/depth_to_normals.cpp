@@ -26,10 +26,7 @@ namespace nd = normal_fusion::depth;
 constexpr int kExitInputError = 1;
 constexpr int kExitUsageError = 2;
 
-class UsageError : public std::runtime_error {
- public:
-  explicit UsageError(const std::string& what) : std::runtime_error(what) {}
-};
+using UsageError = nf::cli::UsageError;
 
 struct Options {
   std::string depth_path, camera_info_path, output_path, confidence_path;
@@ -98,24 +95,15 @@ int integer(const std::string& option, const std::string& text) {
 Options parseArguments(int argc, char** argv) {
   Options o;
   nd::DepthNormalSettings& s = o.settings;
-  for (int i = 1; i < argc; ++i) {
-    std::string option = argv[i];
+  nf::cli::ArgumentCursor arguments(argc, argv);
+  while (arguments.next()) {
+    const std::string& option = arguments.option();
     if (option == "--help") {
+      arguments.expectNoValue();
       o.help = true;
       continue;
     }
-    if (option.rfind("--", 0) != 0) {
-      throw UsageError("unexpected argument '" + option + "' (see --help)");
-    }
-    std::string value;
-    const std::size_t equals = option.find('=');
-    if (equals != std::string::npos) {
-      value = option.substr(equals + 1);
-      option = option.substr(0, equals);
-    } else {
-      if (i + 1 >= argc) throw UsageError(option + " needs a value");
-      value = argv[++i];
-    }
+    const std::string value = arguments.value();
     if (option == "--depth") {
       o.depth_path = value;
     } else if (option == "--camera-info") {

@@ -40,10 +40,7 @@ constexpr int kExitInputError = 1;
 constexpr int kExitUsageError = 2;
 
 /// A malformed command line: unknown option, missing or bad value.
-class UsageError : public std::runtime_error {
- public:
-  explicit UsageError(const std::string& what) : std::runtime_error(what) {}
-};
+using UsageError = nf::cli::UsageError;
 
 /// One --normals argument with the per-input options that followed it.
 struct InputSpec {
@@ -199,35 +196,20 @@ void checkComplete(Options& options) {
 
 Options parseArguments(int argc, char** argv) {
   Options options;
-  for (int i = 1; i < argc; ++i) {
-    std::string option = argv[i];
-    std::string inline_value;
-    bool has_inline_value = false;
-    if (option.rfind("--", 0) != 0) {
-      throw UsageError("unexpected argument '" + option +
-                       "' (options start with --; see --help)");
-    }
-    const std::size_t equals = option.find('=');
-    if (equals != std::string::npos) {
-      inline_value = option.substr(equals + 1);
-      option = option.substr(0, equals);
-      has_inline_value = true;
-    }
+  nf::cli::ArgumentCursor arguments(argc, argv);
+  while (arguments.next()) {
+    const std::string& option = arguments.option();
     // Flags without a value.
     if (option == "--help" || option == "--no-edges" ||
         option == "--print-settings-markdown") {
-      if (has_inline_value) throw UsageError(option + " takes no value");
+      arguments.expectNoValue();
       if (option == "--help") options.help = true;
       if (option == "--print-settings-markdown") options.print_markdown = true;
       if (option == "--no-edges") options.settings.edges.enabled = false;
       continue;
     }
-    const auto value = [&]() -> std::string {
-      if (has_inline_value) return inline_value;
-      if (i + 1 >= argc) throw UsageError(option + " needs a value");
-      return argv[++i];
-    };
-    applyValueOption(option, value, options);
+    applyValueOption(
+        option, [&] { return arguments.value(); }, options);
   }
   if (options.help || options.print_markdown) return options;
   checkComplete(options);

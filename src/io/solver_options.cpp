@@ -185,5 +185,32 @@ void printSolverOptions(std::ostream& out, const SolverSettings& defaults) {
   }
 }
 
+bool ArgumentCursor::next() {
+  if (index_ + 1 >= argc_) return false;
+  option_ = argv_[++index_];
+  if (option_.rfind("--", 0) != 0) {
+    throw UsageError("unexpected argument '" + option_ +
+                     "' (options start with --; see --help)");
+  }
+  const std::size_t equals = option_.find('=');
+  has_inline_value_ = equals != std::string::npos;
+  inline_value_.clear();
+  if (has_inline_value_) {
+    inline_value_ = option_.substr(equals + 1);
+    option_.resize(equals);
+  }
+  return true;
+}
+
+void ArgumentCursor::expectNoValue() const {
+  if (has_inline_value_) throw UsageError(option_ + " takes no value");
+}
+
+std::string ArgumentCursor::value() {
+  if (has_inline_value_) return inline_value_;
+  if (index_ + 1 >= argc_) throw UsageError(option_ + " needs a value");
+  return argv_[++index_];
+}
+
 }  // namespace cli
 }  // namespace normal_fusion

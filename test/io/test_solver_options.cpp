@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "normal_fusion/errors.h"
 #include "normal_fusion/settings_table.h"
@@ -139,6 +141,48 @@ TEST(SolverOptions, AnOldSpellingStillWorksAndNamesTheNewOne) {
   cli::applySolverOption("--huber-eps", "0.02", s, warnings);
   EXPECT_EQ(s.huber_eps, 0.02);
   EXPECT_TRUE(warnings.str().empty());
+}
+
+TEST(ArgumentCursor, SplitsInlineValuesAndTakesTheNextArgument) {
+  std::vector<std::string> words = {"tool",    "--lambda=0.3", "--output",
+                                    "out.exr", "--help",       "--x=a=b"};
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(&w[0]);
+  cli::ArgumentCursor cursor(static_cast<int>(argv.size()), argv.data());
+  ASSERT_TRUE(cursor.next());
+  EXPECT_EQ(cursor.option(), "--lambda");
+  EXPECT_THROW(cursor.expectNoValue(), cli::UsageError);
+  EXPECT_EQ(cursor.value(), "0.3");
+  ASSERT_TRUE(cursor.next());
+  EXPECT_EQ(cursor.option(), "--output");
+  EXPECT_NO_THROW(cursor.expectNoValue());
+  EXPECT_EQ(cursor.value(), "out.exr");
+  ASSERT_TRUE(cursor.next());
+  EXPECT_EQ(cursor.option(), "--help");
+  ASSERT_TRUE(cursor.next());
+  EXPECT_EQ(cursor.option(), "--x");  // only the first '=' splits
+  EXPECT_EQ(cursor.value(), "a=b");
+  EXPECT_FALSE(cursor.next());
+}
+
+TEST(ArgumentCursor, RefusesPositionalArgumentsAndMissingValues) {
+  std::vector<std::string> words = {"tool", "stray", "--output"};
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(&w[0]);
+  cli::ArgumentCursor cursor(static_cast<int>(argv.size()), argv.data());
+  try {
+    cursor.next();
+    FAIL() << "a positional argument was accepted";
+  } catch (const cli::UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("'stray'"), std::string::npos);
+  }
+  ASSERT_TRUE(cursor.next());
+  try {
+    cursor.value();
+    FAIL() << "a missing value was accepted";
+  } catch (const cli::UsageError& e) {
+    EXPECT_EQ(std::string(e.what()), "--output needs a value");
+  }
 }
 
 }  // namespace
