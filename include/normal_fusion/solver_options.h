@@ -1,6 +1,6 @@
-// Command-line options of every solver setting, shared by the tools
-// (fuse_normals, evaluate), made from the settings table, and the walk over
-// a tool's "--name value" / "--name=value" arguments: the option of a
+// The tools' command lines (fuse_normals, evaluate, depth_to_normals): the
+// walk over "--name value" / "--name=value" arguments, and the options of
+// every solver setting, made from the settings table: the option of a
 // setting is "--" + its ROS name with '_' -> '-' (--huber-eps); the table's
 // older spellings still work and print one deprecation line.
 #pragma once
