@@ -24,10 +24,10 @@ out="$repo/output"
 keep_bags=0
 source_args=()
 # The depth normals' two scales (docs/demo.md says why these).
-method_0="${NF_DEMO_METHOD_0:-plane_fit}"
+method_0="${NF_DEMO_METHOD_0:-central_difference}"
 radius_0="${NF_DEMO_RADIUS_0:-1}"
 method_1="${NF_DEMO_METHOD_1:-plane_fit}"
-radius_1="${NF_DEMO_RADIUS_1:-4}"
+radius_1="${NF_DEMO_RADIUS_1:-2}"
 for arg in "$@"; do
   case "$arg" in
     --keep-bags) keep_bags=1 ;;
@@ -92,10 +92,11 @@ rosparam get /rosversion >/dev/null 2>&1 || {
 echo "roscore (pid $core_pid) at $ROS_MASTER_URI"
 
 echo "== the bag through the depth nodelets and the fusion (roslaunch normal_fusion demo.launch)"
-# 30 frames at 1/20 of their 30 Hz: one frame every 0.67 s, above the time of
-# the depth normals and the 200-iteration solve, so that no frame is dropped.
+# 30 frames at 1/40 of their 30 Hz: one frame every 1.3 s, about twice the
+# time of the depth normals and the 200-iteration solve on two busy cores, so
+# that no frame is dropped.
 roslaunch normal_fusion demo.launch input:="$bags/input.bag" \
-  output:="$bags/fused.bag" params:="$repo/config/demo.yaml" rate:=0.05 \
+  output:="$bags/fused.bag" params:="$repo/config/demo.yaml" rate:=0.025 \
   method_0:="$method_0" window_radius_0:="$radius_0" \
   method_1:="$method_1" window_radius_1:="$radius_1" \
   output_log:=log >"$out/logs/roslaunch.log" 2>&1 || {
@@ -152,7 +153,7 @@ fi
     echo '- synthetic: a ray-cast room (320x240), the depth rendered from a depth camera 25 mm beside the colour camera with a depth camera'"'"'s noise; exact normals of the colour camera give the accuracy table'
   fi
   echo "- $normals_source (\`launch/demo.launch\` over \`launch/rgbd.launch\`)"
-  echo '- parameters: `config/demo.yaml` over the library defaults; played at 1/20 of real time; the recorded bag holds the colour image, both normal maps, the fused map and the statistics'
+  echo '- parameters: `config/demo.yaml` over the library defaults; played at 1/40 of real time; the recorded bag holds the colour image, both normal maps, the fused map and the statistics'
   echo '- offline run: `fuse_bag` on the recorded image and normal maps, output in `fuse_bag.txt`; logs in `logs/`'
   if [ "$keep_bags" -eq 0 ]; then
     echo '- the bags named above were temporary (run with --keep-bags to keep them in `bags/`)'
