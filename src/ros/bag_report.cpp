@@ -364,7 +364,7 @@ void addStatsRow(const normal_fusion::FusionStatsConstPtr& st, int index,
 void writeFrameCounts(std::ostream& md, const Options& options,
                       const Bags& bags, const Tally& tally, int frames) {
   if (!options.normals_source.empty()) {
-    md << "- normals: " << options.normals_source << "\n";
+    md << "- where the normals came from: " << options.normals_source << "\n";
   }
   if (!options.played.empty()) {
     const auto lost = [&](std::size_t got) {
@@ -377,7 +377,7 @@ void writeFrameCounts(std::ostream& md, const Options& options,
        << " on normals_1; not fused: " << lost(static_cast<std::size_t>(frames))
        << "\n";
   }
-  md << "- input bag: `" << options.input << "` (" << bags.images.size()
+  md << "- inputs read from `" << options.input << "` (" << bags.images.size()
      << " images on " << options.image_topic << ", " << bags.normals0.size()
      << " maps on " << options.normals0_topic << " (normals_0), "
      << bags.normals1.size() << " on " << options.normals1_topic
