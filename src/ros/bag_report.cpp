@@ -1,15 +1,19 @@
 // bag_report: pictures and a summary of a fused bag, for the demo.
 //
 //   bag_report --input IN.bag --fused OUT.bag --dir DIR [--offline OFF.bag]
-//              [--ground-truth GT.bag] [--title TEXT]
+//              [--ground-truth GT.bag] [--title TEXT] [--image TOPIC]
+//              [--normals-0 TOPIC] [--normals-1 TOPIC] [--played DRIVER.bag]
+//              [--played-topic TOPIC] [--normals-source TEXT] [--run TEXT]
 //
 // For every fused frame it writes DIR/frames/frame_NNN.png: the image, the
-// inputs /normals_0 and /normals_1 (colour-coded, lower resolutions shown
+// two input normal maps of IN.bag (colour-coded, lower resolutions shown
 // with nearest-neighbour pixels) and the fused map, side by side.
-// DIR/summary.md gets the per-frame statistics of /fusion_stats, their totals,
-// a roughness measure of every map (mean angle between neighbouring normals),
-// the agreement with an offline run (fuse_bag) and, when ground truth is given,
-// the PSNR and mean angular error of inputs and output.
+// DIR/summary.md gets where the normals came from (--normals-source), the
+// frames played (--played: the driver's bag, counted on --played-topic) and
+// those dropped on the way, the per-frame statistics of /fusion_stats, their
+// totals, a roughness measure of every map (mean angle between neighbouring
+// normals), the agreement with an offline run (fuse_bag) and, when ground
+// truth is given, the PSNR and mean angular error of inputs and output.
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/Image.h>
@@ -42,7 +46,11 @@ namespace {
 const char* const kUsage =
     "usage: bag_report --input IN.bag --fused OUT.bag --dir DIR\n"
     "                  [--offline OFF.bag] [--ground-truth GT.bag] "
-    "[--title TEXT]\n";
+    "[--title TEXT]\n"
+    "                  [--image TOPIC] [--normals-0 TOPIC] [--normals-1 "
+    "TOPIC]\n"
+    "                  [--played DRIVER.bag] [--played-topic TOPIC]\n"
+    "                  [--normals-source TEXT] [--run TEXT]\n";
 
 using Stamped = std::map<ros::Time, sensor_msgs::ImageConstPtr>;
 
@@ -160,7 +168,20 @@ double mean(const std::vector<double>& v) {
 struct Options {
   std::string input, fused_path, dir, offline, ground_truth,
       title = "normal_fusion demo";
+  std::string image_topic = "/image", normals0_topic = "/normals_0",
+              normals1_topic = "/normals_1";
+  /// The driver's bag that was played, and the topic whose messages count
+  /// the frames played.
+  std::string played, played_topic = "/camera/depth/image_rect_raw";
+  /// Where the input normal maps came from, and what fused them.
+  std::string normals_source, run = "bag.launch";
 };
+
+/// Messages of `topic` in a bag.
+std::size_t countMessages(const std::string& path, const std::string& topic) {
+  rosbag::Bag bag(path, rosbag::bagmode::Read);
+  return rosbag::View(bag, rosbag::TopicQuery(topic)).size();
+}
 
 /// Reads the command line into `options`; false (after a message) on a
 /// missing value or an unknown option.
@@ -185,6 +206,20 @@ bool parseOptions(int argc, char** argv, Options& options) {
       options.ground_truth = value;
     } else if (key == "--title") {
       options.title = value;
+    } else if (key == "--image") {
+      options.image_topic = value;
+    } else if (key == "--normals-0") {
+      options.normals0_topic = value;
+    } else if (key == "--normals-1") {
+      options.normals1_topic = value;
+    } else if (key == "--played") {
+      options.played = value;
+    } else if (key == "--played-topic") {
+      options.played_topic = value;
+    } else if (key == "--normals-source") {
+      options.normals_source = value;
+    } else if (key == "--run") {
+      options.run = value;
     } else {
       std::fprintf(stderr, "bag_report: unknown option %s\n%s", key.c_str(),
                    kUsage);
@@ -199,13 +234,17 @@ struct Bags {
   Stamped images, normals0, normals1, fused;
   std::map<ros::Time, normal_fusion::FusionStatsConstPtr> stats;
   Stamped fused_offline, gt;
+  std::size_t played = 0;  ///< frames of the driver's bag, 0: not given
 };
 
 Bags readBags(const Options& options) {
   Bags bags;
-  bags.images = readImages(options.input, "/image");
-  bags.normals0 = readImages(options.input, "/normals_0");
-  bags.normals1 = readImages(options.input, "/normals_1");
+  bags.images = readImages(options.input, options.image_topic);
+  bags.normals0 = readImages(options.input, options.normals0_topic);
+  bags.normals1 = readImages(options.input, options.normals1_topic);
+  if (!options.played.empty()) {
+    bags.played = countMessages(options.played, options.played_topic);
+  }
   bags.fused = readImages(options.fused_path, "/fused_normals");
   bags.stats = readStats(options.fused_path);
   if (!options.offline.empty()) {
@@ -241,13 +280,13 @@ std::pair<nf::NormalMap, nf::NormalMap> writeFramePicture(
   nf::NormalMap in0, in1;
   if (bags.normals0.count(stamp)) {
     in0 = normalsOf(*bags.normals0.at(stamp));
-    tiles.push_back(labelled(picture(in0, W, H), "normals_0 (fine)"));
+    tiles.push_back(labelled(picture(in0, W, H), "normals_0"));
     tally.rough_in0.push_back(roughnessDeg(in0));
     tally.valid0 += validShare(in0);
   }
   if (bags.normals1.count(stamp)) {
     in1 = normalsOf(*bags.normals1.at(stamp));
-    tiles.push_back(labelled(picture(in1, W, H), "normals_1 (coarse)"));
+    tiles.push_back(labelled(picture(in1, W, H), "normals_1"));
     tally.rough_in1.push_back(roughnessDeg(in1));
     tally.valid1 += validShare(in1);
   }
@@ -266,7 +305,7 @@ std::pair<nf::NormalMap, nf::NormalMap> writeFramePicture(
 /// ground truth, where the bags have that stamp.
 void compareFrame(const Bags& bags, const ros::Time& stamp,
                   const nf::NormalMap& out, const nf::NormalMap& in0,
-                  Tally& tally) {
+                  const nf::NormalMap& in1, Tally& tally) {
   if (bags.fused_offline.count(stamp)) {
     const nf::NormalMap other = normalsOf(*bags.fused_offline.at(stamp));
     double worst = 0.0;
@@ -286,6 +325,10 @@ void compareFrame(const Bags& bags, const ros::Time& stamp,
     if (!in0.empty() && in0.sameSize(truth)) {
       tally.psnr_in0.push_back(nf::psnr(in0, truth));
       tally.angle_in0.push_back(nf::angularError(in0, truth).mean_deg);
+    }
+    if (!in1.empty() && in1.sameSize(truth)) {
+      tally.psnr_in1.push_back(nf::psnr(in1, truth));
+      tally.angle_in1.push_back(nf::angularError(in1, truth).mean_deg);
     }
   }
 }
@@ -316,17 +359,40 @@ void addStatsRow(const normal_fusion::FusionStatsConstPtr& st, int index,
   tally.skipped = std::max<std::uint64_t>(tally.skipped, st->frames_skipped);
 }
 
+/// The summary's lines on where the maps came from and how many frames made
+/// it through each stage.
+void writeFrameCounts(std::ostream& md, const Options& options,
+                      const Bags& bags, const Tally& tally, int frames) {
+  if (!options.normals_source.empty()) {
+    md << "- where the normals came from: " << options.normals_source << "\n";
+  }
+  if (!options.played.empty()) {
+    const auto lost = [&](std::size_t got) {
+      return got < bags.played ? bags.played - got : 0;
+    };
+    md << "- played: `" << options.played << "`, " << bags.played
+       << " frames on " << options.played_topic << "; dropped before the "
+       << "fusion: " << lost(bags.normals0.size()) << " on normals_0, "
+       << lost(bags.normals1.size())
+       << " on normals_1; not fused: " << lost(static_cast<std::size_t>(frames))
+       << "\n";
+  }
+  md << "- inputs read from `" << options.input << "` (" << bags.images.size()
+     << " images on " << options.image_topic << ", " << bags.normals0.size()
+     << " maps on " << options.normals0_topic << " (normals_0), "
+     << bags.normals1.size() << " on " << options.normals1_topic
+     << " (normals_1))\n";
+  md << "- fused by the nodelet (" << options.run << "): `"
+     << options.fused_path << "`: " << frames << " fused frames, " << tally.warm
+     << " warm-started, " << tally.dropped << " dropped (worker busy), "
+     << tally.skipped << " skipped (bad input)\n";
+}
+
 void writeSummary(const Options& options, const Bags& bags, const Tally& tally,
                   int frames) {
   std::ofstream md(options.dir + "/summary.md");
   md << "# " << options.title << "\n\n";
-  md << "- input bag: `" << options.input << "` (" << bags.images.size()
-     << " images, " << bags.normals0.size() << " maps on /normals_0, "
-     << bags.normals1.size() << " on /normals_1)\n";
-  md << "- fused by the nodelet (bag.launch): `" << options.fused_path
-     << "`: " << frames << " fused frames, " << tally.warm << " warm-started, "
-     << tally.dropped << " dropped (worker busy), " << tally.skipped
-     << " skipped (bad input)\n";
+  writeFrameCounts(md, options, bags, tally, frames);
   md << "- solve time per frame: mean " << 1e3 * mean(tally.solve)
      << " ms; latency (set complete -> outputs ready): mean "
      << 1e3 * mean(tally.latency) << " ms; inner iterations per frame: mean "
@@ -344,13 +410,12 @@ void writeSummary(const Options& options, const Bags& bags, const Tally& tally,
         "lower is smoother); valid = share of pixels with a normal.\n\n"
      << "| map | roughness (deg) | valid |\n|---|---|---|\n";
   if (!tally.rough_in0.empty()) {
-    md << "| normals_0 (fine, noisy) | " << mean(tally.rough_in0) << " | "
+    md << "| normals_0 | " << mean(tally.rough_in0) << " | "
        << tally.valid0 / tally.rough_in0.size() << " |\n";
   }
   if (!tally.rough_in1.empty()) {
-    md << "| normals_1 (coarse, smooth; its own resolution) | "
-       << mean(tally.rough_in1) << " | "
-       << tally.valid1 / tally.rough_in1.size() << " |\n";
+    md << "| normals_1 (at its own resolution) | " << mean(tally.rough_in1)
+       << " | " << tally.valid1 / tally.rough_in1.size() << " |\n";
   }
   md << "| fused | " << mean(tally.rough_out) << " | 1 |\n";
   if (!tally.psnr_out.empty()) {
@@ -360,12 +425,17 @@ void writeSummary(const Options& options, const Bags& bags, const Tally& tally,
       md << "| normals_0 | " << mean(tally.psnr_in0) << " | "
          << mean(tally.angle_in0) << " |\n";
     }
+    if (!tally.psnr_in1.empty()) {
+      md << "| normals_1 | " << mean(tally.psnr_in1) << " | "
+         << mean(tally.angle_in1) << " |\n";
+    }
     md << "| fused | " << mean(tally.psnr_out) << " | " << mean(tally.angle_out)
        << " |\n";
   }
   md << "\n## Pictures\n\n"
-     << "`frames/frame_NNN.png`: image, normals_0, normals_1 (upsampled "
-        "for display), fused; colour c = (n + 1) / 2 * 255 with x -> R, "
+     << "`frames/frame_NNN.png`: image, normals_0, normals_1 (a smaller "
+        "map upsampled for display), fused; colour c = (n + 1) / 2 * 255 with "
+        "x -> R, "
         "y -> G, z -> B, black = missing.\n\n"
      << "![first frame](first_frame.png)\n";
   md << "\n## Per frame\n\n" << tally.table.str();
@@ -397,7 +467,7 @@ int main(int argc, char** argv) {
       const nf::NormalMap out = normalsOf(*fused_msg);
       const auto inputs =
           writeFramePicture(bags, stamp, out, index, options.dir, tally);
-      compareFrame(bags, stamp, out, inputs.first, tally);
+      compareFrame(bags, stamp, out, inputs.first, inputs.second, tally);
       addStatsRow(bags.stats.count(stamp) ? bags.stats.at(stamp) : nullptr,
                   index, stamp, tally);
       ++index;
