@@ -20,11 +20,26 @@ constexpr double kMotionWarpSameSurfaceRatio = 0.05;
 /// first frame of a size, then never again).
 struct MotionWarpScratch {
   SolverState state;  ///< the warped state, swapped in
-  /// Per current pixel: the z-buffer, the float bits of the nearest depth.
+  /// Per layer of splats (nearest pixels, then the rest of the 2x2) and
+  /// current pixel: the z-buffer, the float bits of the nearest depth.
   std::vector<std::uint32_t> nearest_depth_bits;
-  /// Per current pixel: the winning splat, its squared distance to the
-  /// pixel centre (float bits) above the previous pixel's index.
+  /// The same: the winning splat, its squared distance to the pixel centre
+  /// (float bits) above the previous pixel's index.
   std::vector<std::uint64_t> winner;
+
+  /// Sizes every buffer for a width x height state of num_inputs inputs
+  /// (-1: normals only); allocates only when a size changes.
+  void resize(int width, int height, int num_inputs) {
+    if (num_inputs >= 0) {
+      state.resize(width, height, num_inputs);
+    } else {
+      state.normals.resize(width, height, 3);
+    }
+    const std::size_t layers =
+        2 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+    nearest_depth_bits.resize(layers);
+    winner.resize(layers);
+  }
 };
 
 /// Warps a state solved on the previous frame into the current one, for a
@@ -33,18 +48,19 @@ struct MotionWarpScratch {
 /// aligned with the previous image: the state's size and K).
 ///
 /// Every previous pixel with depth is back-projected, moved by T_cur_prev and
-/// projected into the current image; it splats to the current pixels closer
-/// than one pixel in x and in y (the 2x2 around its position; one pixel on a
-/// pixel centre), so that a surface that the motion magnifies (up to
-/// twice per frame) leaves no one-pixel cracks, and so that a near surface
-/// keeps a far one from showing through its own cracks. A z-buffer over the
-/// splats decides which surface is visible at a pixel; among the splats of
-/// that surface (within kMotionWarpSameSurfaceRatio of the nearest depth) the
-/// one nearest to the pixel centre gives the pixel its normal, rotated by R
-/// (the duals likewise, or reset: DualWarp). Pixels that no splat reaches
-/// (disoccluded, outside the previous view, or seen only where the previous
-/// depth was missing) get NaN normals and zero duals, as the rotation warp's
-/// unknown pixels: the solver's warm start fills them from the current
+/// projected into the current image. Each splat reaches the pixel nearest
+/// to it (within half a pixel in x and y) and, as a second layer, the rest
+/// of its 2x2 (closer than one pixel): a pixel that no splat is nearest to
+/// (a one-pixel crack of a surface that the motion magnifies, up to twice per
+/// frame) takes the second layer, so that cracks close without a surface
+/// growing over its neighbour by the wider footprint. Per layer a z-buffer
+/// over the splats decides which surface is visible at a pixel; among the
+/// splats of that surface (within kMotionWarpSameSurfaceRatio of the nearest
+/// depth) the one nearest to the pixel centre gives the pixel its normal,
+/// rotated by R (the duals likewise, or reset: DualWarp). Pixels that no splat
+/// reaches (disoccluded, outside the previous view, or seen only where the
+/// previous depth was missing) get NaN normals and zero duals, as the rotation
+/// warp's unknown pixels: the solver's warm start fills them from the current
 /// inputs. Throws InputError on a bad K, a state without normals, a depth of
 /// another size, a non-rotation R or a non-finite t.
 void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,

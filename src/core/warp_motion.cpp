@@ -63,6 +63,28 @@ void splatRange(double u, int size, int* lo, int* hi) {
   *hi = std::min(u > u0 ? x0 + 1 : x0, size - 1);
 }
 
+/// Calls f(j, x, y) for each pixel (x, y) (index j) of the W x H image that
+/// a splat at (u, v) reaches.
+template <typename F>
+void forEachSplatTarget(double u, double v, int W, int H, F&& f) {
+  int x_lo, x_hi, y_lo, y_hi;
+  splatRange(u, W, &x_lo, &x_hi);
+  splatRange(v, H, &y_lo, &y_hi);
+  for (int y = y_lo; y <= y_hi; ++y) {
+    for (int x = x_lo; x <= x_hi; ++x) {
+      f(static_cast<std::size_t>(y) * W + x, x, y);
+    }
+  }
+}
+
+/// 0 when pixel (x, y) is the one nearest to the splat at (u, v) (within half
+/// a pixel in x and y), 1 for the rest of its 2x2: only pixels that no splat
+/// is nearest to take one of the second layer (cracks), so that a surface
+/// does not grow over its neighbour by the wider footprint.
+std::size_t splatLayer(double u, double v, int x, int y) {
+  return std::abs(u - x) <= 0.5 && std::abs(v - y) <= 0.5 ? 0 : 1;
+}
+
 std::uint32_t floatBits(float value) {
   std::uint32_t bits;
   std::memcpy(&bits, &value, sizeof bits);
@@ -199,7 +221,6 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
                     DualWarp::kRotate);
 }
 
-// Over 80 lines: its three parallel passes share the precomputed arguments.
 void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
                        const CameraIntrinsics& K, const Pose& T_cur_prev,
                        MotionWarpScratch& scratch, int num_threads,
@@ -211,14 +232,9 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
   const bool has_duals = state.compatible(W, H, L);
   const int groups = has_duals ? 3 + L : 1;
   const int threads = resolveThreadCount(num_threads);
+  scratch.resize(W, H, has_duals ? L : -1);
   SolverState& warped = scratch.state;
-  if (has_duals) {
-    warped.resize(W, H, L);
-  } else {
-    warped.normals.resize(W, H, 3);
-  }
-  scratch.nearest_depth_bits.resize(N);
-  scratch.winner.resize(N);
+  // Per layer (0: the pixel nearest to the splat, 1: its 2x2) and pixel.
   std::uint32_t* nearest = scratch.nearest_depth_bits.data();
   std::uint64_t* winner = scratch.winner.data();
   const std::uint32_t far_bits =
@@ -228,65 +244,55 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
   float Rf[9];
   rotationAsFloat(T_cur_prev.R, Rf);
   const bool reset_duals = dual_warp == DualWarp::kReset;
+  // Calls visit(k, u, v, z, target, x, y) for each pixel (x, y) that
+  // previous pixel k's splat at (u, v), depth z, reaches.
+  const auto splats_of_row = [&](int sy, auto&& visit) {
+    for (int sx = 0; sx < W; ++sx) {
+      const std::size_t k = static_cast<std::size_t>(sy) * W + sx;
+      double u, v;
+      float z;
+      if (!validSource(state.normals, k) ||
+          !projection.at(sx, sy, depth[k], W, H, &u, &v, &z)) {
+        continue;
+      }
+      forEachSplatTarget(u, v, W, H, [&](std::size_t j, int x, int y) {
+        visit(k, u, v, z, j, x, y);
+      });
+    }
+  };
 #pragma omp parallel num_threads(threads)
   {
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(N); ++i) {
-      nearest[i] = far_bits;
-      winner[i] = kNoWinner;
+    for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(2 * N); ++j) {
+      nearest[j] = far_bits;
+      winner[j] = kNoWinner;
     }
-    // The z-buffer: the nearest splat's depth at each current pixel.
+    // The z-buffers: the nearest splat's depth at each pixel, per layer.
 #pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        const std::size_t i = static_cast<std::size_t>(y) * W + x;
-        double u, v;
-        float z;
-        if (!validSource(state.normals, i) ||
-            !projection.at(x, y, depth[i], W, H, &u, &v, &z)) {
-          continue;
-        }
-        int x_lo, x_hi, y_lo, y_hi;
-        splatRange(u, W, &x_lo, &x_hi);
-        splatRange(v, H, &y_lo, &y_hi);
-        for (int ty = y_lo; ty <= y_hi; ++ty) {
-          for (int tx = x_lo; tx <= x_hi; ++tx) {
-            atomicMin(nearest + static_cast<std::size_t>(ty) * W + tx,
-                      floatBits(z));
-          }
-        }
-      }
+    for (int sy = 0; sy < H; ++sy) {
+      splats_of_row(sy, [&](std::size_t, double u, double v, float z,
+                            std::size_t j, int x, int y) {
+        atomicMin(nearest + splatLayer(u, v, x, y) * N + j, floatBits(z));
+      });
     }
     // Among the splats of the visible surface, the nearest to the centre.
 #pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        const std::size_t i = static_cast<std::size_t>(y) * W + x;
-        double u, v;
-        float z;
-        if (!validSource(state.normals, i) ||
-            !projection.at(x, y, depth[i], W, H, &u, &v, &z)) {
-          continue;
+    for (int sy = 0; sy < H; ++sy) {
+      splats_of_row(sy, [&](std::size_t k, double u, double v, float z,
+                            std::size_t j, int x, int y) {
+        const std::size_t at = splatLayer(u, v, x, y) * N + j;
+        if (z <= bitsFloat(nearest[at]) * kSameSurfaceFactor) {
+          atomicMin(winner + at, winnerKey(u, v, x, y, k));
         }
-        int x_lo, x_hi, y_lo, y_hi;
-        splatRange(u, W, &x_lo, &x_hi);
-        splatRange(v, H, &y_lo, &y_hi);
-        for (int ty = y_lo; ty <= y_hi; ++ty) {
-          for (int tx = x_lo; tx <= x_hi; ++tx) {
-            const std::size_t j = static_cast<std::size_t>(ty) * W + tx;
-            if (z <= bitsFloat(nearest[j]) * kSameSurfaceFactor) {
-              atomicMin(winner + j, winnerKey(u, v, tx, ty, i));
-            }
-          }
-        }
-      }
+      });
     }
 #pragma omp for schedule(static)
     for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(N); ++j) {
+      const std::uint64_t key =
+          winner[j] != kNoWinner ? winner[j] : winner[N + j];
       const std::ptrdiff_t source =
-          winner[j] == kNoWinner
-              ? -1
-              : static_cast<std::ptrdiff_t>(winner[j] & 0xffffffffu);
+          key == kNoWinner ? -1
+                           : static_cast<std::ptrdiff_t>(key & 0xffffffffu);
       writePixel(state, warped, groups, static_cast<std::size_t>(j), source, Rf,
                  reset_duals);
     }
@@ -313,35 +319,42 @@ void warpStateByMotionReference(SolverState& state,
   const Projection projection(K, T_cur_prev);
   float Rf[9];
   rotationAsFloat(T_cur_prev.R, Rf);
-  // Does previous pixel (sx, sy) splat onto current pixel (x, y)? Its
-  // position and depth when it does.
-  auto reaches = [&](int sx, int sy, int x, int y, double* u, double* v,
-                     float* z) {
+  // Does previous pixel (sx, sy) splat onto current pixel (x, y) as its
+  // nearest pixel (layer 0: within half a pixel in x and y) or as the rest
+  // of its footprint (layer 1: closer than one pixel)? Its position and
+  // depth when it does.
+  auto reaches = [&](int sx, int sy, int x, int y, int layer, double* u,
+                     double* v, float* z) {
     const std::size_t s = static_cast<std::size_t>(sy) * W + sx;
     if (!validSource(state.normals, s) ||
         !projection.at(sx, sy, depth_prev_m.at(0, sy, sx), W, H, u, v, z)) {
       return false;
     }
-    // Closer than one pixel in both directions.
-    return std::abs(*u - x) < 1.0 && std::abs(*v - y) < 1.0;
+    const double du = std::abs(*u - x), dv = std::abs(*v - y);
+    const bool nearest = du <= 0.5 && dv <= 0.5;
+    return layer == 0 ? nearest : (!nearest && du < 1.0 && dv < 1.0);
   };
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
-      float z_min = std::numeric_limits<float>::infinity();
-      double u, v;
-      float z;
-      for (int sy = 0; sy < H; ++sy) {
-        for (int sx = 0; sx < W; ++sx) {
-          if (reaches(sx, sy, x, y, &u, &v, &z)) z_min = std::min(z_min, z);
-        }
-      }
       std::uint64_t best = kNoWinner;
-      for (int sy = 0; sy < H; ++sy) {
-        for (int sx = 0; sx < W; ++sx) {
-          if (reaches(sx, sy, x, y, &u, &v, &z) &&
-              z <= z_min * kSameSurfaceFactor) {
-            const std::size_t s = static_cast<std::size_t>(sy) * W + sx;
-            best = std::min(best, winnerKey(u, v, x, y, s));
+      for (int layer = 0; layer < 2 && best == kNoWinner; ++layer) {
+        float z_min = std::numeric_limits<float>::infinity();
+        double u, v;
+        float z;
+        for (int sy = 0; sy < H; ++sy) {
+          for (int sx = 0; sx < W; ++sx) {
+            if (reaches(sx, sy, x, y, layer, &u, &v, &z)) {
+              z_min = std::min(z_min, z);
+            }
+          }
+        }
+        for (int sy = 0; sy < H; ++sy) {
+          for (int sx = 0; sx < W; ++sx) {
+            if (reaches(sx, sy, x, y, layer, &u, &v, &z) &&
+                z <= z_min * kSameSurfaceFactor) {
+              const std::size_t s = static_cast<std::size_t>(sy) * W + sx;
+              best = std::min(best, winnerKey(u, v, x, y, s));
+            }
           }
         }
       }
