@@ -26,6 +26,11 @@ struct MotionWarpScratch {
   /// The same: the winning splat, its squared distance to the pixel centre
   /// (float bits) above the previous pixel's index.
   std::vector<std::uint64_t> winner;
+  /// Per previous pixel: where it lands in the current image and its depth
+  /// there (+inf: nowhere).
+  std::vector<float> splat_u, splat_v, splat_z;
+  /// Per previous row: the range of v its splats land in.
+  std::vector<float> row_v_min, row_v_max;
 
   /// Sizes every buffer for a width x height state of num_inputs inputs
   /// (-1: normals only); allocates only when a size changes.
@@ -39,6 +44,11 @@ struct MotionWarpScratch {
         2 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
     nearest_depth_bits.resize(layers);
     winner.resize(layers);
+    splat_u.resize(layers / 2);
+    splat_v.resize(layers / 2);
+    splat_z.resize(layers / 2);
+    row_v_min.resize(static_cast<std::size_t>(height));
+    row_v_max.resize(static_cast<std::size_t>(height));
   }
 };
 

@@ -28,7 +28,8 @@ class Projection {
 
   /// The splat of previous pixel (x, y) at depth z_prev: false when it has no
   /// depth, lands behind the camera or reaches no pixel of the W x H image.
-  bool at(int x, int y, float z_prev, int W, int H, double* u, double* v,
+  /// (u, v) are rounded to float, as the fast warp stores them.
+  bool at(int x, int y, float z_prev, int W, int H, float* u, float* v,
           float* z_cur) const {
     if (!(z_prev > 0.0f) || !(z_prev < std::numeric_limits<float>::max())) {
       return false;
@@ -40,11 +41,15 @@ class Projection {
     }
     const Vec3 p = multiply(K_, X);
     if (!(X[2] > 1e-6) || !(p[2] > 1e-12)) return false;
-    *u = p[0] / p[2];
-    *v = p[1] / p[2];
-    *z_cur = static_cast<float>(X[2]);
+    const double u_cur = p[0] / p[2], v_cur = p[1] / p[2];
     // floor(u) in [-1, W - 1]: at least one of its 2x2 pixels is inside.
-    return *u >= -1.0 && *u < W && *v >= -1.0 && *v<H&& * z_cur> 0.0f;
+    if (!(u_cur >= -1.0 && u_cur < W && v_cur >= -1.0 && v_cur < H)) {
+      return false;
+    }
+    *u = static_cast<float>(u_cur);
+    *v = static_cast<float>(v_cur);
+    *z_cur = static_cast<float>(X[2]);
+    return *u >= -1.0f && *u < W && *v >= -1.0f && *v<H&& * z_cur> 0.0f;
   }
 
  private:
@@ -63,13 +68,16 @@ void splatRange(double u, int size, int* lo, int* hi) {
   *hi = std::min(u > u0 ? x0 + 1 : x0, size - 1);
 }
 
-/// Calls f(j, x, y) for each pixel (x, y) (index j) of the W x H image that
-/// a splat at (u, v) reaches.
+/// Calls f(j, x, y) for each pixel (x, y) (index j) of the W x H image in
+/// rows y_begin .. y_end - 1 that a splat at (u, v) reaches.
 template <typename F>
-void forEachSplatTarget(double u, double v, int W, int H, F&& f) {
+void forEachSplatTarget(double u, double v, int W, int H, int y_begin,
+                        int y_end, F&& f) {
   int x_lo, x_hi, y_lo, y_hi;
   splatRange(u, W, &x_lo, &x_hi);
   splatRange(v, H, &y_lo, &y_hi);
+  y_lo = std::max(y_lo, y_begin);
+  y_hi = std::min(y_hi, y_end - 1);
   for (int y = y_lo; y <= y_hi; ++y) {
     for (int x = x_lo; x <= x_hi; ++x) {
       f(static_cast<std::size_t>(y) * W + x, x, y);
@@ -103,15 +111,6 @@ std::uint64_t winnerKey(double u, double v, int x, int y, std::size_t source) {
   const float d2 = static_cast<float>((u - x) * (u - x) + (v - y) * (v - y));
   return (static_cast<std::uint64_t>(floatBits(d2)) << 32) |
          static_cast<std::uint64_t>(source);
-}
-
-template <typename T>
-void atomicMin(T* target, T value) {
-  T current = __atomic_load_n(target, __ATOMIC_RELAXED);
-  while (value < current &&
-         !__atomic_compare_exchange_n(target, &current, value, true,
-                                      __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
-  }
 }
 
 bool validSource(const NormalMap& normals, std::size_t i) {
@@ -194,6 +193,68 @@ void writePixel(SolverState& state, SolverState& warped, int groups,
   }
 }
 
+/// Row y of `warped` from the previous pixels `source[j]` (kNoWinner: none)
+/// of `state`: normals rotated by R and renormalized (NaN where none or
+/// degenerate), the duals rotated (zero where none) or, with
+/// DualWarp::kReset, zero; plane by plane, so that the loops stream.
+void writeRow(const SolverState& state, SolverState& warped,
+              std::uint64_t* source, int y, const float* R, DualWarp dual_warp,
+              bool has_duals) {
+  const int W = state.normals.width();
+  const std::size_t N = state.normals.pixelCount();
+  const std::size_t row = static_cast<std::size_t>(y) * W;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float* n = state.normals.data();
+  float* out = warped.normals.data();
+  for (int x = 0; x < W; ++x) {
+    const std::size_t j = row + x;
+    float m[3] = {nan, nan, nan};
+    if (source[j] != kNoWinner) {
+      const std::size_t k = static_cast<std::size_t>(source[j]);
+      for (int r = 0; r < 3; ++r) {
+        m[r] = R[3 * r] * n[k] + R[3 * r + 1] * n[N + k] +
+               R[3 * r + 2] * n[2 * N + k];
+      }
+      const float len = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+      const bool known = len > 1e-6f;
+      for (float& value : m) value = known ? value / len : nan;
+      // A degenerate normal predicts nothing: no duals either.
+      if (!known) source[j] = kNoWinner;
+    }
+    for (int c = 0; c < 3; ++c) out[c * N + j] = m[c];
+  }
+  if (!has_duals) return;
+  const int groups = 2 + static_cast<int>(state.dual_data.size());
+  for (int g = 0; g < groups; ++g) {
+    const PlanarImage& src_image = g == 0   ? state.dual_h
+                                   : g == 1 ? state.dual_v
+                                            : state.dual_data[g - 2];
+    PlanarImage& dst_image = g == 0   ? warped.dual_h
+                             : g == 1 ? warped.dual_v
+                                      : warped.dual_data[g - 2];
+    float* dst = dst_image.data();
+    if (dual_warp == DualWarp::kReset) {
+      for (int c = 0; c < 3; ++c) {
+        std::fill(dst + c * N + row, dst + c * N + row + W, 0.0f);
+      }
+      continue;
+    }
+    const float* src = src_image.data();
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = row + x;
+      float p[3] = {0.0f, 0.0f, 0.0f};
+      if (source[j] != kNoWinner) {
+        const std::size_t k = static_cast<std::size_t>(source[j]);
+        for (int r = 0; r < 3; ++r) {
+          p[r] = R[3 * r] * src[k] + R[3 * r + 1] * src[N + k] +
+                 R[3 * r + 2] * src[2 * N + k];
+        }
+      }
+      for (int c = 0; c < 3; ++c) dst[c * N + j] = p[c];
+    }
+  }
+}
+
 /// Swaps the warped buffers in; a state without usable duals keeps none.
 void swapIn(SolverState& state, SolverState& warped, bool has_duals) {
   std::swap(state.normals, warped.normals);
@@ -212,6 +273,72 @@ void rotationAsFloat(const Mat3& R, float out[9]) {
   for (int k = 0; k < 9; ++k) out[k] = static_cast<float>(R[k]);
 }
 
+/// The splats of one band of current rows y_begin .. y_end - 1: their
+/// z-buffers, their winners and the band's rows of `warped`. Every band
+/// reads all splats (skipping the previous rows that land elsewhere) and
+/// writes only its own pixels, so that bands run in parallel without
+/// atomics and the result does not depend on how the image is banded.
+// Over 80 lines: its three steps share the band's buffers.
+void warpBand(const SolverState& state, MotionWarpScratch& scratch, int y_begin,
+              int y_end, const float* R, DualWarp dual_warp, bool has_duals) {
+  const int W = state.normals.width(), H = state.normals.height();
+  const std::size_t N = state.normals.pixelCount();
+  std::uint32_t* nearest = scratch.nearest_depth_bits.data();
+  std::uint64_t* winner = scratch.winner.data();
+  const float* splat_u = scratch.splat_u.data();
+  const float* splat_v = scratch.splat_v.data();
+  const float* splat_z = scratch.splat_z.data();
+  const float far = std::numeric_limits<float>::infinity();
+  const std::size_t first = static_cast<std::size_t>(y_begin) * W;
+  const std::size_t last = static_cast<std::size_t>(y_end) * W;
+  for (int layer = 0; layer < 2; ++layer) {
+    std::fill(nearest + layer * N + first, nearest + layer * N + last,
+              floatBits(far));
+    std::fill(winner + layer * N + first, winner + layer * N + last, kNoWinner);
+  }
+  // Calls visit(k, u, v, z, j, x, y) for the splats reaching the band.
+  const auto for_each_splat = [&](auto&& visit) {
+    for (int sy = 0; sy < H; ++sy) {
+      // A splat reaches the rows closer than one pixel to its v.
+      if (!(scratch.row_v_max[sy] > y_begin - 1.0f &&
+            scratch.row_v_min[sy] < static_cast<float>(y_end))) {
+        continue;
+      }
+      const std::size_t row = static_cast<std::size_t>(sy) * W;
+      for (std::size_t k = row; k < row + W; ++k) {
+        const float u = splat_u[k], v = splat_v[k], z = splat_z[k];
+        if (!(z < far) || !(v > y_begin - 1.0f && v < y_end)) continue;
+        forEachSplatTarget(
+            u, v, W, H, y_begin, y_end,
+            [&](std::size_t j, int x, int y) { visit(k, u, v, z, j, x, y); });
+      }
+    }
+  };
+  // The z-buffers: the nearest splat's depth at each pixel, per layer.
+  for_each_splat(
+      [&](std::size_t, float u, float v, float z, std::size_t j, int x, int y) {
+        std::uint32_t& at = nearest[splatLayer(u, v, x, y) * N + j];
+        at = std::min(at, floatBits(z));
+      });
+  // Among the splats of the visible surface, the nearest to the centre.
+  for_each_splat([&](std::size_t k, float u, float v, float z, std::size_t j,
+                     int x, int y) {
+    const std::size_t at = splatLayer(u, v, x, y) * N + j;
+    if (z <= bitsFloat(nearest[at]) * kSameSurfaceFactor) {
+      winner[at] = std::min(winner[at], winnerKey(u, v, x, y, k));
+    }
+  });
+  // The winners' previous pixels (kNoWinner: none), in the first layer.
+  for (std::size_t j = first; j < last; ++j) {
+    const std::uint64_t key =
+        winner[j] != kNoWinner ? winner[j] : winner[N + j];
+    winner[j] = key == kNoWinner ? kNoWinner : (key & 0xffffffffu);
+  }
+  for (int y = y_begin; y < y_end; ++y) {
+    writeRow(state, scratch.state, winner, y, R, dual_warp, has_duals);
+  }
+}
+
 }  // namespace
 
 void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
@@ -227,77 +354,49 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
                        DualWarp dual_warp) {
   checkMotionWarpArguments(state, depth_prev_m, K, T_cur_prev);
   const int W = state.normals.width(), H = state.normals.height();
-  const std::size_t N = state.normals.pixelCount();
   const int L = static_cast<int>(state.dual_data.size());
   const bool has_duals = state.compatible(W, H, L);
-  const int groups = has_duals ? 3 + L : 1;
   const int threads = resolveThreadCount(num_threads);
   scratch.resize(W, H, has_duals ? L : -1);
-  SolverState& warped = scratch.state;
-  // Per layer (0: the pixel nearest to the splat, 1: its 2x2) and pixel.
-  std::uint32_t* nearest = scratch.nearest_depth_bits.data();
-  std::uint64_t* winner = scratch.winner.data();
-  const std::uint32_t far_bits =
-      floatBits(std::numeric_limits<float>::infinity());
+  const float far = std::numeric_limits<float>::infinity();
   const Projection projection(K, T_cur_prev);
   const float* depth = depth_prev_m.plane(0);
   float Rf[9];
   rotationAsFloat(T_cur_prev.R, Rf);
-  const bool reset_duals = dual_warp == DualWarp::kReset;
-  // Calls visit(k, u, v, z, target, x, y) for each pixel (x, y) that
-  // previous pixel k's splat at (u, v), depth z, reaches.
-  const auto splats_of_row = [&](int sy, auto&& visit) {
-    for (int sx = 0; sx < W; ++sx) {
-      const std::size_t k = static_cast<std::size_t>(sy) * W + sx;
-      double u, v;
-      float z;
-      if (!validSource(state.normals, k) ||
-          !projection.at(sx, sy, depth[k], W, H, &u, &v, &z)) {
-        continue;
-      }
-      forEachSplatTarget(u, v, W, H, [&](std::size_t j, int x, int y) {
-        visit(k, u, v, z, j, x, y);
-      });
-    }
-  };
+  const DualWarp duals = has_duals ? dual_warp : DualWarp::kReset;
+  // Bands of current rows, a few per thread (their costs differ).
+  const int bands = std::min(H, 4 * threads);
 #pragma omp parallel num_threads(threads)
   {
-#pragma omp for schedule(static)
-    for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(2 * N); ++j) {
-      nearest[j] = far_bits;
-      winner[j] = kNoWinner;
-    }
-    // The z-buffers: the nearest splat's depth at each pixel, per layer.
+    // Where each previous pixel lands (z = +inf: nowhere), and each
+    // previous row's range of v.
 #pragma omp for schedule(static)
     for (int sy = 0; sy < H; ++sy) {
-      splats_of_row(sy, [&](std::size_t, double u, double v, float z,
-                            std::size_t j, int x, int y) {
-        atomicMin(nearest + splatLayer(u, v, x, y) * N + j, floatBits(z));
-      });
-    }
-    // Among the splats of the visible surface, the nearest to the centre.
-#pragma omp for schedule(static)
-    for (int sy = 0; sy < H; ++sy) {
-      splats_of_row(sy, [&](std::size_t k, double u, double v, float z,
-                            std::size_t j, int x, int y) {
-        const std::size_t at = splatLayer(u, v, x, y) * N + j;
-        if (z <= bitsFloat(nearest[at]) * kSameSurfaceFactor) {
-          atomicMin(winner + at, winnerKey(u, v, x, y, k));
+      float v_min = far, v_max = -far;
+      for (int sx = 0; sx < W; ++sx) {
+        const std::size_t k = static_cast<std::size_t>(sy) * W + sx;
+        float u, v, z;
+        if (!validSource(state.normals, k) ||
+            !projection.at(sx, sy, depth[k], W, H, &u, &v, &z)) {
+          scratch.splat_z[k] = far;
+          continue;
         }
-      });
+        scratch.splat_u[k] = u;
+        scratch.splat_v[k] = v;
+        scratch.splat_z[k] = z;
+        v_min = std::min(v_min, v);
+        v_max = std::max(v_max, v);
+      }
+      scratch.row_v_min[sy] = v_min;
+      scratch.row_v_max[sy] = v_max;
     }
-#pragma omp for schedule(static)
-    for (std::ptrdiff_t j = 0; j < static_cast<std::ptrdiff_t>(N); ++j) {
-      const std::uint64_t key =
-          winner[j] != kNoWinner ? winner[j] : winner[N + j];
-      const std::ptrdiff_t source =
-          key == kNoWinner ? -1
-                           : static_cast<std::ptrdiff_t>(key & 0xffffffffu);
-      writePixel(state, warped, groups, static_cast<std::size_t>(j), source, Rf,
-                 reset_duals);
+#pragma omp for schedule(dynamic, 1)
+    for (int b = 0; b < bands; ++b) {
+      warpBand(state, scratch, H * b / bands, H * (b + 1) / bands, Rf, duals,
+               has_duals);
     }
   }
-  swapIn(state, warped, has_duals);
+  swapIn(state, scratch.state, has_duals);
 }
 
 namespace internal {
@@ -323,14 +422,15 @@ void warpStateByMotionReference(SolverState& state,
   // nearest pixel (layer 0: within half a pixel in x and y) or as the rest
   // of its footprint (layer 1: closer than one pixel)? Its position and
   // depth when it does.
-  auto reaches = [&](int sx, int sy, int x, int y, int layer, double* u,
-                     double* v, float* z) {
+  auto reaches = [&](int sx, int sy, int x, int y, int layer, float* u,
+                     float* v, float* z) {
     const std::size_t s = static_cast<std::size_t>(sy) * W + sx;
     if (!validSource(state.normals, s) ||
         !projection.at(sx, sy, depth_prev_m.at(0, sy, sx), W, H, u, v, z)) {
       return false;
     }
-    const double du = std::abs(*u - x), dv = std::abs(*v - y);
+    const double du = std::abs(static_cast<double>(*u) - x);
+    const double dv = std::abs(static_cast<double>(*v) - y);
     const bool nearest = du <= 0.5 && dv <= 0.5;
     return layer == 0 ? nearest : (!nearest && du < 1.0 && dv < 1.0);
   };
@@ -339,8 +439,7 @@ void warpStateByMotionReference(SolverState& state,
       std::uint64_t best = kNoWinner;
       for (int layer = 0; layer < 2 && best == kNoWinner; ++layer) {
         float z_min = std::numeric_limits<float>::infinity();
-        double u, v;
-        float z;
+        float u, v, z;
         for (int sy = 0; sy < H; ++sy) {
           for (int sx = 0; sx < W; ++sx) {
             if (reaches(sx, sy, x, y, layer, &u, &v, &z)) {
