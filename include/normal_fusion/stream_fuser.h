@@ -1,7 +1,7 @@
 // A stream of frames fused one after the other: when the previous result
-// warm-starts the next frame (rotated by the camera's rotation), when the
-// stream restarts, the inputs' averages over time and the frame budget's
-// reserves. The policy the node runs, without ROS: the ROS pipeline, the
+// warm-starts the next frame (moved by the camera's rotation, or by its full
+// motion through the previous frame's depth), when the stream restarts, the
+// inputs' averages over time and the frame budget's reserves. The policy the node runs, without ROS: the ROS pipeline, the
 // benchmarks and the tools all fuse their streams through it.
 #pragma once
 
@@ -31,9 +31,9 @@ struct StreamSettings {
   double warm_start_max_gap = stream_default::warm_start_max_gap;
   /// Each input averaged over the stream's frames before the solve.
   TemporalSettings temporal;
-  /// What the rotation warp does with the duals; unset: reset while the
-  /// solver's local refinement is on (warm_refine_iterations > 0), else
-  /// rotated (see DualWarp).
+  /// What the warp (rotation or motion) does with the duals; unset: reset
+  /// while the solver's local refinement is on (warm_refine_iterations > 0),
+  /// else rotated (see DualWarp).
   std::optional<DualWarp> dual_warp;
 };
 

@@ -278,7 +278,6 @@ void rotationAsFloat(const Mat3& R, float out[9]) {
 /// reads all splats (skipping the previous rows that land elsewhere) and
 /// writes only its own pixels, so that bands run in parallel without
 /// atomics and the result does not depend on how the image is banded.
-// Over 80 lines: its three steps share the band's buffers.
 void warpBand(const SolverState& state, MotionWarpScratch& scratch, int y_begin,
               int y_end, const float* R, DualWarp dual_warp, bool has_duals) {
   const int W = state.normals.width(), H = state.normals.height();
