@@ -1,7 +1,7 @@
 // A stream of frames fused one after the other: when the previous result
-// warm-starts the next frame (rotated by the camera's rotation), when the
-// stream restarts, the inputs' averages over time and the frame budget's
-// reserves. The policy the node runs, without ROS: the ROS pipeline, the
+// warm-starts the next frame (moved by the camera's rotation, or by its full
+// motion through the previous frame's depth), when the stream restarts, the
+// inputs' averages over time and the frame budget's reserves. The policy the node runs, without ROS: the ROS pipeline, the
 // benchmarks and the tools all fuse their streams through it.
 #pragma once
 
@@ -15,6 +15,7 @@
 #include "normal_fusion/solver.h"
 #include "normal_fusion/temporal.h"
 #include "normal_fusion/warp.h"
+#include "normal_fusion/warp_motion.h"
 
 namespace normal_fusion {
 
@@ -30,14 +31,16 @@ struct StreamSettings {
   double warm_start_max_gap = stream_default::warm_start_max_gap;
   /// Each input averaged over the stream's frames before the solve.
   TemporalSettings temporal;
-  /// What the rotation warp does with the duals; unset: reset while the
-  /// solver's local refinement is on (warm_refine_iterations > 0), else
-  /// rotated (see DualWarp).
+  /// What the warp (rotation or motion) does with the duals; unset: reset
+  /// while the solver's local refinement is on (warm_refine_iterations > 0),
+  /// else rotated (see DualWarp).
   std::optional<DualWarp> dual_warp;
 };
 
 /// The camera's rotation from the previous frame to this one, as far as the
-/// caller knows it.
+/// caller knows it, and its translation where that is known too (the full
+/// motion: the warm start then follows it through the previous frame's
+/// depth, see StreamFuser::fuse).
 struct FrameRotation {
   enum class Kind {
     kStill,    ///< not compensated: the camera is taken as still
@@ -47,10 +50,16 @@ struct FrameRotation {
   Kind kind = Kind::kStill;
   /// X_cur = R_cur_prev X_prev, row-major (kKnown).
   std::array<double, 9> R_cur_prev{};
+  /// kKnown: t_cur_prev holds the translation (X_cur = R_cur_prev X_prev +
+  /// t_cur_prev, metres); false: the rotation alone is known.
+  bool has_translation = false;
+  std::array<double, 3> t_cur_prev{};
   std::string reason;  ///< kUnknown: why
 
   static FrameRotation still() { return FrameRotation(); }
   static FrameRotation known(const std::array<double, 9>& R_cur_prev);
+  /// The full motion T_cur_prev (rotation and translation) is known.
+  static FrameRotation knownMotion(const Pose& T_cur_prev);
   static FrameRotation unknown(const std::string& reason);
 };
 
@@ -63,10 +72,13 @@ struct StreamResult {
   std::string restart_reason;
   /// The rotation was applied (the state warped, or the averages carried).
   bool rotated = false;
+  /// The state was warped by the full motion through the previous frame's
+  /// depth (warpStateByMotion) instead of the rotation alone.
+  bool motion_warped = false;
   /// The inputs joined the previous frames' averages.
   bool inputs_averaged = false;
   double average_seconds = 0.0;  ///< the temporal averaging's time
-  double warp_seconds = 0.0;     ///< the rotation warp's time
+  double warp_seconds = 0.0;     ///< the warp's time
   /// The overrun reserve this frame's budget was given, seconds.
   double budget_reserve_seconds = 0.0;
   /// A rotation asked for (not kStill) could not be used on a frame that
@@ -122,10 +134,21 @@ class StreamFuser {
   /// solver throws, Cancelled, or Error when the solve gives a pixel without
   /// a finite unit normal; the stream is then reset. Call endFrame() once
   /// the frame's outputs are done.
+  ///
+  /// `depth_m` (optional): this frame's depth in metres (one plane, NaN =
+  /// none, aligned with the image: its size and K), kept for the next frame:
+  /// when that one's rotation comes with its translation, its warm start
+  /// follows the full motion through this depth (warpStateByMotion);
+  /// without either, the rotation alone (warpStateByRotation). A depth of
+  /// another size is not kept. The input averages follow the rotation alone.
   void fuse(std::int64_t stamp_ns, FusionProblem& frame,
             const FrameRotation& rotation,
-            std::chrono::steady_clock::time_point started,
-            StreamResult* result);
+            std::chrono::steady_clock::time_point started, StreamResult* result,
+            const ScalarMap* depth_m = nullptr);
+
+  /// Whether the previous frame's depth is kept for the next frame's motion
+  /// warp.
+  bool hasPreviousDepth() const { return has_previous_depth_; }
 
   /// Ends the frame fused last: `encode_seconds` of the caller's work on its
   /// outputs join the estimate reserved in later budgets, and the frame's
@@ -150,11 +173,14 @@ class StreamFuser {
   double overrunReserveSeconds() const { return overrun_reserve_s_; }
 
  private:
-  /// Applies a known rotation to the state (warm starts) or checks it;
-  /// returns false with the reason when it cannot be used.
-  bool applyRotation(const CameraIntrinsics& K,
-                     const std::array<double, 9>& R_cur_prev,
-                     std::string* reason, double* seconds);
+  /// Applies a known rotation to the state (warm starts; by the full motion
+  /// when its translation and the previous depth are known, then
+  /// *motion_warped) or checks it; returns false with the reason when it
+  /// cannot be used.
+  bool applyRotation(const CameraIntrinsics& K, const FrameRotation& rotation,
+                     std::string* reason, double* seconds, bool* motion_warped);
+  /// Keeps `depth_m` (or forgets the previous one) for the next frame.
+  void keepDepth(const ScalarMap* depth_m, const FusionProblem& frame);
   /// The inputs' temporal averages for this frame; restarted unless
   /// `joined`.
   void averageInputs(FusionProblem& frame, const FrameRotation& rotation,
@@ -167,7 +193,11 @@ class StreamFuser {
   std::string name_;
   Solver solver_;
   SolverState state_;
-  SolverState warp_scratch_;  ///< buffers of the rotation warp, reused
+  SolverState warp_scratch_;          ///< buffers of the rotation warp, reused
+  MotionWarpScratch motion_scratch_;  ///< buffers of the motion warp, reused
+  /// The previous frame's depth, metres (valid when has_previous_depth_).
+  ScalarMap previous_depth_m_;
+  bool has_previous_depth_ = false;
   SolveReport report_;
   TemporalAverage temporal_;
   /// The averages were updated with the previous frame (averaging was on).

@@ -16,6 +16,13 @@ FrameRotation FrameRotation::known(const std::array<double, 9>& R_cur_prev) {
   return rotation;
 }
 
+FrameRotation FrameRotation::knownMotion(const Pose& T_cur_prev) {
+  FrameRotation rotation = known(T_cur_prev.R);
+  rotation.has_translation = true;
+  rotation.t_cur_prev = T_cur_prev.t;
+  return rotation;
+}
+
 FrameRotation FrameRotation::unknown(const std::string& reason) {
   FrameRotation rotation;
   rotation.kind = Kind::kUnknown;
@@ -67,6 +74,7 @@ void StreamFuser::reset() {
   state_.clear();
   temporal_.reset();
   averages_current_ = false;
+  has_previous_depth_ = false;
 }
 
 bool StreamFuser::continuesStream(std::int64_t stamp_ns,
@@ -107,9 +115,11 @@ bool StreamFuser::continuesStream(std::int64_t stamp_ns,
 }
 
 bool StreamFuser::applyRotation(const CameraIntrinsics& K,
-                                const std::array<double, 9>& R_cur_prev,
-                                std::string* reason, double* seconds) {
+                                const FrameRotation& rotation,
+                                std::string* reason, double* seconds,
+                                bool* motion_warped) {
   const auto start = std::chrono::steady_clock::now();
+  const std::array<double, 9>& R_cur_prev = rotation.R_cur_prev;
   try {
     if (settings_.warm_start) {
       // With the local refinement the duals are reset (as good, and
@@ -117,8 +127,18 @@ bool StreamFuser::applyRotation(const CameraIntrinsics& K,
       const DualWarp dual_warp = settings_.dual_warp.value_or(
           solver_.settings().warm_refine_iterations > 0 ? DualWarp::kReset
                                                         : DualWarp::kRotate);
-      warpStateByRotation(state_, K, R_cur_prev, warp_scratch_,
-                          solver_.settings().num_threads, dual_warp);
+      const int threads = solver_.settings().num_threads;
+      if (rotation.has_translation && has_previous_depth_) {
+        Pose T_cur_prev;
+        T_cur_prev.R = R_cur_prev;
+        T_cur_prev.t = rotation.t_cur_prev;
+        warpStateByMotion(state_, previous_depth_m_, K, T_cur_prev,
+                          motion_scratch_, threads, dual_warp);
+        *motion_warped = true;
+      } else {
+        warpStateByRotation(state_, K, R_cur_prev, warp_scratch_, threads,
+                            dual_warp);
+      }
     } else {
       internal::checkRotation(R_cur_prev, "the transform");
     }
@@ -195,7 +215,7 @@ std::string StreamFuser::streamStartNote(const std::string& reason) const {
 void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
                        const FrameRotation& rotation,
                        std::chrono::steady_clock::time_point started,
-                       StreamResult* result) {
+                       StreamResult* result, const ScalarMap* depth_m) {
   *result = StreamResult();
   frame_started_ = started;
   if (has_previous_ && stamp_ns < previous_stamp_ns_) {
@@ -226,9 +246,10 @@ void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
   }
   if (continuous && rotation.kind != FrameRotation::Kind::kStill) {
     std::string why = rotation.reason;
-    result->rotated = rotation.kind == FrameRotation::Kind::kKnown &&
-                      applyRotation(frame.K, rotation.R_cur_prev, &why,
-                                    &result->warp_seconds);
+    result->rotated =
+        rotation.kind == FrameRotation::Kind::kKnown &&
+        applyRotation(frame.K, rotation, &why, &result->warp_seconds,
+                      &result->motion_warped);
     if (!result->rotated) {
       result->rotation_failed = true;
       result->rotation_unknown = why;
@@ -268,12 +289,27 @@ void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
             "settings are degenerate); frame skipped, stream reset";
     throw Error(text.str());
   }
+  keepDepth(depth_m, frame);
   has_previous_ = true;
   previous_stamp_ns_ = stamp_ns;
   previous_K_ = frame.K;
   ++frames_fused_;
   // Until endFrame() says more: the frame's time so far.
   previous_seconds_ = secondsSince(started);
+}
+
+void StreamFuser::keepDepth(const ScalarMap* depth_m,
+                            const FusionProblem& frame) {
+  has_previous_depth_ = settings_.warm_start && depth_m != nullptr &&
+                        depth_m->channels() == 1 &&
+                        depth_m->sameSize(frame.image);
+  if (!has_previous_depth_) return;
+  // Copied into buffers of the stream's size: no allocation once running.
+  previous_depth_m_.resize(depth_m->width(), depth_m->height(), 1);
+  std::copy(depth_m->data(), depth_m->data() + depth_m->pixelCount(),
+            previous_depth_m_.data());
+  motion_scratch_.resize(state_.normals.width(), state_.normals.height(),
+                         static_cast<int>(state_.dual_data.size()));
 }
 
 double StreamFuser::endFrame(double encode_seconds) {

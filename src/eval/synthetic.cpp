@@ -606,5 +606,38 @@ std::vector<Frame> renderSequence(int scene_id, int width, int height,
   return frames;
 }
 
+Pose relativePose(const Pose& cur, const Pose& prev) {
+  Pose T_cur_prev;
+  T_cur_prev.R = relativeRotation(cur, prev);
+  const Vec3 Rt = multiply(T_cur_prev.R, prev.t);
+  for (int r = 0; r < 3; ++r) T_cur_prev.t[r] = cur.t[r] - Rt[r];
+  return T_cur_prev;
+}
+
+std::vector<Frame> renderTranslation(int scene_id, int width, int height,
+                                     int num_frames, const Vec3& step_cam,
+                                     double fps) {
+  const Scene scene = makeScene(scene_id);
+  requireSize(width, height);
+  if (num_frames < 1 || !(fps > 0.0)) {
+    std::ostringstream msg;
+    msg << "renderTranslation: num_frames = " << num_frames << ", fps = " << fps
+        << ": expected at least 1 and > 0";
+    throw ParameterError(msg.str());
+  }
+  for (double v : step_cam) requireFinite("renderTranslation: step_cam", v);
+  requireFinite("renderTranslation: fps", fps);
+  const Pose start = defaultPose(scene_id);
+  std::vector<Frame> frames;
+  for (int k = 0; k < num_frames; ++k) {
+    // X_cam_k = X_cam_0 - k step_cam: the camera centre moves by +k step.
+    Pose pose = start;
+    for (int r = 0; r < 3; ++r) pose.t[r] -= k * step_cam[r];
+    frames.push_back(renderPrepared(scene, width, height, pose));
+    frames.back().stamp = k / fps;
+  }
+  return frames;
+}
+
 }  // namespace synthetic
 }  // namespace normal_fusion

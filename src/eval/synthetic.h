@@ -71,6 +71,19 @@ std::vector<Frame> renderSequence(int scene_id, int width, int height,
                                   double degrees_per_frame = 0.3,
                                   double fps = 30.0);
 
+/// The camera's motion from `prev` to `cur`: T_cur_prev (X_cur = R X_prev +
+/// t), the argument warpStateByMotion takes.
+Pose relativePose(const Pose& cur, const Pose& prev);
+
+/// A translating camera: `num_frames` views at `fps` (stamp k / fps) with the
+/// default orientation, the camera moving by `step_cam` metres per frame
+/// along its own axes (x right, y down, z forward) from the default pose.
+/// Throws ParameterError for num_frames < 1, fps <= 0, non-finite values or
+/// a camera centre outside the room.
+std::vector<Frame> renderTranslation(int scene_id, int width, int height,
+                                     int num_frames, const Vec3& step_cam,
+                                     double fps = 30.0);
+
 /// The paper's noise: n' = d / |d|, d = n + (r_x, r_y, r_z),
 /// r_i ~ N(0, sigma^2). Missing pixels stay missing. Deterministic for a given
 /// seed (the noise of a pixel does not depend on which others are missing).

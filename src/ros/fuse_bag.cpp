@@ -247,6 +247,9 @@ std::vector<nn::TopicRole> rolesFor(const Options& o,
         role.name = o.confidence.count(role.input) ? o.confidence.at(role.input)
                                                    : "/" + role.name;
         break;
+      case nn::TopicRole::kDepth:
+        role.name = "/" + role.name;
+        break;
     }
   }
   return roles;
@@ -313,7 +316,7 @@ class BagFusion {
   /// Messages whose records cannot be read (corrupt bag): skipped, counted.
   std::size_t unreadable_ = 0, tf_unreadable_ = 0;
   std::unique_ptr<tf2::BufferCore> tf_buffer_;
-  nn::RotationLookup rotation_;
+  nn::MotionLookup motion_;
   std::unique_ptr<nn::OutputBag> out_;
   std::unique_ptr<Synchronizer> sync_;
   nn::MessageLimits limits_;
@@ -349,7 +352,7 @@ void BagFusion::loadTransforms(rosbag::Bag& in) {
       ++transforms;
     }
   }
-  rotation_ = nn::rotationLookupFromBuffer(*tf_buffer_, settings_.fixed_frame);
+  motion_ = nn::motionLookupFromBuffer(*tf_buffer_, settings_.fixed_frame);
   if (!o_.quiet) {
     std::fprintf(stderr, "fuse_bag: %zu transforms from /tf, /tf_static\n",
                  transforms);
@@ -386,7 +389,7 @@ void BagFusion::processSets(std::vector<Synchronizer::Set> sets) {
     try {
       const nn::InputSet input = nn::inputSetFrom(
           roles_, set.messages, set.present, settings_.num_inputs);
-      pipeline_->process(input, rotation_, o_.vis, &output_);
+      pipeline_->process(input, motion_, o_.vis, &output_);
     } catch (const std::bad_alloc&) {
       throw nn::FatalError("out of memory while fusing a set");
     } catch (const std::exception& e) {
@@ -395,6 +398,7 @@ void BagFusion::processSets(std::vector<Synchronizer::Set> sets) {
       continue;
     }
     if (!output_.warning.empty()) report(output_.warning);
+    if (!output_.error.empty()) report(output_.error);
     output_.stats->frames_skipped = skipped_;
     output_.stats->frames_dropped = 0;
     const ros::Time stamp = output_.fused->header.stamp;

@@ -431,6 +431,7 @@ void NormalFusionNodelet::configCb(Config& config, uint32_t /*level*/) {
     settings.num_inputs = settings_.num_inputs;
     settings.approximate_sync = settings_.approximate_sync;
     settings.queue_size = settings_.queue_size;
+    settings.use_depth = settings_.use_depth;
     for (int i = 0; i < kMaxInputs; ++i) {
       settings.inputs[i].use_confidence = settings_.inputs[i].use_confidence;
       settings.inputs[i].optional = settings_.inputs[i].optional;
@@ -454,7 +455,7 @@ void NormalFusionNodelet::configCb(Config& config, uint32_t /*level*/) {
   }
 }
 
-RotationLookup NormalFusionNodelet::applyNewSettings() {
+CameraMotionLookup NormalFusionNodelet::applyNewSettings() {
   std::string fixed_frame;
   double tf_timeout = 0.0;
   {
@@ -471,18 +472,18 @@ RotationLookup NormalFusionNodelet::applyNewSettings() {
     fixed_frame = settings_.fixed_frame;
     tf_timeout = settings_.tf_timeout;
   }
-  if (fixed_frame.empty()) return RotationLookup();
-  const RotationLookup lookup =
-      rotationLookupFromBuffer(*tf_buffer_, fixed_frame);
-  return [this, lookup, fixed_frame, tf_timeout](
-             const std::string& frame, const ros::Time& previous,
-             const ros::Time& current, std::array<double, 9>* R,
-             std::string* reason) {
+  if (fixed_frame.empty()) return CameraMotionLookup();
+  // The full motion: without a depth the stream uses its rotation alone.
+  const MotionLookup lookup = motionLookupFromBuffer(*tf_buffer_, fixed_frame);
+  return MotionLookup([this, lookup, fixed_frame, tf_timeout](
+                          const std::string& frame, const ros::Time& previous,
+                          const ros::Time& current, Pose* T_cur_prev,
+                          std::string* reason) {
     // Wait up to tf_timeout for both ends of the transform.
     tf_buffer_->canTransform(frame, current, frame, previous, fixed_frame,
                              ros::Duration(tf_timeout));
-    return lookup(frame, previous, current, R, reason);
-  };
+    return lookup(frame, previous, current, T_cur_prev, reason);
+  });
 }
 
 void NormalFusionNodelet::workerLoop() {
@@ -503,9 +504,9 @@ void NormalFusionNodelet::workerLoop() {
     }
     const ros::WallTime started = ros::WallTime::now();
     if (reset) pipeline_->resetWarmStart();
-    const RotationLookup rotation = applyNewSettings();
+    const CameraMotionLookup motion = applyNewSettings();
     try {
-      pipeline_->process(set, rotation, pub_vis_.getNumSubscribers() > 0,
+      pipeline_->process(set, motion, pub_vis_.getNumSubscribers() > 0,
                          &output);
     } catch (const std::bad_alloc&) {
       pipeline_->resetWarmStart();
@@ -528,6 +529,10 @@ void NormalFusionNodelet::workerLoop() {
       continue;
     }
     if (!output.warning.empty()) logThrottled(false, output.warning);
+    if (!output.error.empty()) {
+      recordError(output.error);
+      logThrottled(true, output.error);
+    }
     if (!output.note.empty()) NODELET_INFO("%s", output.note.c_str());
     ++frames_processed_;
     const ros::WallTime done = ros::WallTime::now();

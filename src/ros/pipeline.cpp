@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 
+#include "normal_fusion/depth.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/ros/conversions.h"
 
@@ -35,6 +36,7 @@ std::vector<TopicRole> topicRoles(const NodeSettings& settings) {
           {TopicRole::kConfidence, i, "confidence_" + std::to_string(i)});
     }
   }
+  if (settings.use_depth) roles.push_back({TopicRole::kDepth, -1, "depth"});
   return roles;
 }
 
@@ -63,6 +65,9 @@ InputSet inputSetFrom(const std::vector<TopicRole>& roles,
       case TopicRole::kConfidence:
         set.confidence[role.input] = messages[j].image;
         break;
+      case TopicRole::kDepth:
+        set.depth = messages[j].image;
+        break;
     }
   }
   // An input that takes a confidence is present only with it.
@@ -77,7 +82,9 @@ std::vector<bool> requiredTopics(const std::vector<TopicRole>& roles,
                                  const NodeSettings& settings) {
   std::vector<bool> required;
   for (const TopicRole& role : roles) {
-    required.push_back(role.input < 0 || !settings.inputs[role.input].optional);
+    required.push_back(
+        role.kind != TopicRole::kDepth &&
+        (role.input < 0 || !settings.inputs[role.input].optional));
   }
   return required;
 }
@@ -97,6 +104,9 @@ TopicNames topicNamesOf(const std::vector<TopicRole>& roles, int num_inputs) {
         break;
       case TopicRole::kConfidence:
         names.confidence[role.input] = role.name;
+        break;
+      case TopicRole::kDepth:
+        names.depth = role.name;
         break;
     }
   }
@@ -119,10 +129,22 @@ double secondsBetween(const ros::Time& later, const ros::Time& earlier) {
 
 RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
                                         const std::string& fixed_frame) {
+  const MotionLookup motion = motionLookupFromBuffer(buffer, fixed_frame);
+  return [motion](const std::string& frame, const ros::Time& previous,
+                  const ros::Time& current, std::array<double, 9>* R_cur_prev,
+                  std::string* reason) {
+    Pose T_cur_prev;
+    if (!motion(frame, previous, current, &T_cur_prev, reason)) return false;
+    *R_cur_prev = T_cur_prev.R;
+    return true;
+  };
+}
+
+MotionLookup motionLookupFromBuffer(const tf2::BufferCore& buffer,
+                                    const std::string& fixed_frame) {
   return [&buffer, fixed_frame](
              const std::string& frame, const ros::Time& previous,
-             const ros::Time& current, std::array<double, 9>* R_cur_prev,
-             std::string* reason) {
+             const ros::Time& current, Pose* T_cur_prev, std::string* reason) {
     try {
       // X_cur = T X_prev: source frame at the previous stamp, target frame at
       // the current one, chained through the fixed frame.
@@ -135,12 +157,18 @@ RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
         return false;
       }
       const double x = q.x / n, y = q.y / n, z = q.z / n, w = q.w / n;
+      const auto& t = T.transform.translation;
+      if (!std::isfinite(t.x) || !std::isfinite(t.y) || !std::isfinite(t.z)) {
+        *reason = "the transform's translation is not finite";
+        return false;
+      }
+      T_cur_prev->t = {{t.x, t.y, t.z}};
       // Unit quaternion to a row-major rotation matrix.
-      *R_cur_prev = {1 - 2 * (y * y + z * z), 2 * (x * y - z * w),
-                     2 * (x * z + y * w),     2 * (x * y + z * w),
-                     1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-                     2 * (x * z - y * w),     2 * (y * z + x * w),
-                     1 - 2 * (x * x + y * y)};
+      T_cur_prev->R = {1 - 2 * (y * y + z * z), 2 * (x * y - z * w),
+                       2 * (x * z + y * w),     2 * (x * y + z * w),
+                       1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                       2 * (x * z - y * w),     2 * (y * z + x * w),
+                       1 - 2 * (x * x + y * y)};
       return true;
     } catch (const std::exception& e) {
       *reason = e.what();
@@ -279,7 +307,7 @@ std::vector<std::uint8_t> FusionPipeline::convertSet(const InputSet& set) {
   return present;
 }
 
-FrameRotation FusionPipeline::rotationFor(const RotationLookup& rotation,
+FrameRotation FusionPipeline::rotationFor(const CameraMotionLookup& motion,
                                           const std::string& frame_id,
                                           const ros::Time& stamp) const {
   if (settings_.fixed_frame.empty()) return FrameRotation::still();
@@ -292,27 +320,79 @@ FrameRotation FusionPipeline::rotationFor(const RotationLookup& rotation,
     return FrameRotation::still();  // not used: the stream restarts
   }
   std::string why;
-  std::array<double, 9> R_cur_prev{};
-  if (!rotation) {
+  if (!motion) {
     why = "no transform source";
   } else if (frame_id.empty()) {
     why = "the image has no frame_id";
   } else {
     ros::Time previous;
     previous.fromNSec(static_cast<std::uint64_t>(fuser_.previousStampNs()));
-    if (rotation(frame_id, previous, stamp, &R_cur_prev, &why)) {
-      return FrameRotation::known(R_cur_prev);
+    if (motion.motion) {
+      Pose T_cur_prev;
+      if (motion.motion(frame_id, previous, stamp, &T_cur_prev, &why)) {
+        return FrameRotation::knownMotion(T_cur_prev);
+      }
+    } else {
+      std::array<double, 9> R_cur_prev{};
+      if (motion.rotation(frame_id, previous, stamp, &R_cur_prev, &why)) {
+        return FrameRotation::known(R_cur_prev);
+      }
     }
   }
   return FrameRotation::unknown(why);
 }
 
+const ScalarMap* FusionPipeline::depthOf(const InputSet& set,
+                                         std::string* error) {
+  if (!settings_.use_depth || !set.depth) return nullptr;
+  const sensor_msgs::Image& msg = *set.depth;
+  const std::string consequence =
+      "; the warm start of the next set follows the rotation alone";
+  const std::string& image_frame = set.image->header.frame_id;
+  if (!msg.header.frame_id.empty() && !image_frame.empty() &&
+      msg.header.frame_id != image_frame) {
+    *error = topics_.depth + ": frame_id '" + msg.header.frame_id +
+             "' differs from the image's '" + image_frame +
+             "'; expected the depth aligned with the image" + consequence;
+    return nullptr;
+  }
+  if (static_cast<int>(msg.width) != problem_.image.width() ||
+      static_cast<int>(msg.height) != problem_.image.height()) {
+    *error = topics_.depth + ": the depth is " + std::to_string(msg.width) +
+             "x" + std::to_string(msg.height) + ", the image " +
+             std::to_string(problem_.image.width()) + "x" +
+             std::to_string(problem_.image.height()) +
+             "; expected the depth aligned with the image (same size)" +
+             consequence;
+    return nullptr;
+  }
+  try {
+    if (msg.encoding == "16UC1" || msg.encoding == "mono16") {
+      depth::depthFromMillimetres(msg.data.data(), msg.width, msg.height,
+                                  msg.step, depth_m_);
+    } else if (msg.encoding == "32FC1") {
+      depth::depthFromMetres(msg.data.data(), msg.width, msg.height, msg.step,
+                             depth_m_);
+    } else {
+      *error = topics_.depth + ": unsupported depth encoding '" + msg.encoding +
+               "'; expected 16UC1 (millimetres) or 32FC1 (metres), REP 118" +
+               consequence;
+      return nullptr;
+    }
+  } catch (const Error& e) {
+    *error = topics_.depth + ": " + e.what() + consequence;
+    return nullptr;
+  }
+  return &depth_m_;
+}
+
 void FusionPipeline::process(const InputSet& set,
-                             const RotationLookup& rotation, bool make_vis,
+                             const CameraMotionLookup& motion, bool make_vis,
                              PipelineOutput* output) {
   const auto started = std::chrono::steady_clock::now();
   output->warning.clear();
   output->note.clear();
+  output->error.clear();
   if (!set.image) throw InputError(topics_.image + ": no image in the set");
   if (!set.camera_info) {
     throw InputError(topics_.camera_info +
@@ -334,10 +414,11 @@ void FusionPipeline::process(const InputSet& set,
 
   const ros::Time stamp = image_msg.header.stamp;
   const FrameRotation frame_rotation =
-      rotationFor(rotation, image_msg.header.frame_id, stamp);
+      rotationFor(motion, image_msg.header.frame_id, stamp);
+  const ScalarMap* depth_m = depthOf(set, &output->error);
   StreamResult result;
   fuser_.fuse(static_cast<std::int64_t>(stamp.toNSec()), problem_,
-              frame_rotation, started, &result);
+              frame_rotation, started, &result, depth_m);
   output->warning = result.warning;
   output->note = result.note;
   if (result.rotation_failed) {
@@ -387,6 +468,7 @@ void FusionPipeline::encodeOutputs(const std_msgs::Header& header,
   stats->inputs_averaged = result.inputs_averaged;
   stats->warm_started = report.warm_started;
   stats->rotation_compensated = result.rotated && report.warm_started;
+  stats->motion_compensated = result.motion_warped && report.warm_started;
   stats->converged = report.converged;
   stats->budget_exhausted = report.budget_exhausted;
   stats->inputs_present.assign(present.begin(), present.end());

@@ -14,9 +14,9 @@
 #include <string>
 #include <vector>
 
+#include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
 #include "normal_fusion/metrics.h"
-#include "eval/synthetic.h"
 
 namespace normal_fusion {
 namespace {
@@ -292,6 +292,69 @@ TEST(StreamFuser, TheBudgetReserveTracksOverruns) {
   }
   EXPECT_EQ(after[0], 0.0);
   EXPECT_EQ(after[2], 0.0);
+}
+
+/// Under a translation the warm start follows the full motion through the
+/// previous frame's depth: with a single inner iteration and no local
+/// refinement the fused map is about the warm start itself, much nearer the
+/// truth than the rotation warp's.
+TEST(StreamFuser, WithDepthTheWarmStartFollowsTheTranslation) {
+  // 10 cm forward and 5 cm to the right.
+  const auto frames =
+      synthetic::renderTranslation(0, 96, 72, 2, {{0.05, 0.0, 0.1}});
+  const Pose T_cur_prev =
+      synthetic::relativePose(frames[1].pose, frames[0].pose);
+  const auto warm_start_psnr = [&](const FrameRotation& rotation,
+                                   bool with_depth, StreamResult* result) {
+    StreamSettings settings = streamSettings();
+    settings.solver.time_budget_ms = 0.0;
+    StreamFuser fuser(settings);
+    FusionProblem first = problemFor(frames[0], 1);
+    fuser.fuse(0, first, FrameRotation::still(),
+               std::chrono::steady_clock::now(), result,
+               with_depth ? &frames[0].depth : nullptr);
+    EXPECT_EQ(fuser.hasPreviousDepth(), with_depth);
+    settings.solver.max_total_inner_iterations = 1;
+    settings.solver.warm_refine_iterations = 0;
+    fuser.setSettings(settings);
+    FusionProblem second = problemFor(frames[1], 2);
+    fuser.fuse(nanoseconds(frames[1].stamp), second, rotation,
+               std::chrono::steady_clock::now(), result, &frames[1].depth);
+    EXPECT_TRUE(fuser.lastReport().warm_started);
+    return psnr(fuser.fusedNormals(), frames[1].normals_gt);
+  };
+  StreamResult by_motion, by_rotation, no_depth;
+  const double motion_db =
+      warm_start_psnr(FrameRotation::knownMotion(T_cur_prev), true, &by_motion);
+  const double rotation_db =
+      warm_start_psnr(FrameRotation::known(T_cur_prev.R), true, &by_rotation);
+  const double no_depth_db =
+      warm_start_psnr(FrameRotation::knownMotion(T_cur_prev), false, &no_depth);
+  EXPECT_TRUE(by_motion.rotated && by_motion.motion_warped);
+  EXPECT_TRUE(by_rotation.rotated && !by_rotation.motion_warped);
+  // Without the previous depth: the rotation alone, bit for bit.
+  EXPECT_TRUE(no_depth.rotated && !no_depth.motion_warped);
+  EXPECT_EQ(no_depth_db, rotation_db);
+  EXPECT_GT(motion_db, rotation_db + 4.0)
+      << motion_db << " dB against " << rotation_db << " dB";
+}
+
+/// A depth of another size than the image is not kept: the next frame's warm
+/// start follows the rotation alone.
+TEST(StreamFuser, ADepthOfAnotherSizeIsNotKept) {
+  const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
+  StreamFuser fuser(streamSettings());
+  FusionProblem problem = problemFor(frame, 1);
+  StreamResult result;
+  const ScalarMap small(32, 24, 1, 1.0f);
+  fuser.fuse(0, problem, FrameRotation::still(),
+             std::chrono::steady_clock::now(), &result, &small);
+  EXPECT_FALSE(fuser.hasPreviousDepth());
+  fuser.fuse(nanoseconds(0.033), problem, FrameRotation::still(),
+             std::chrono::steady_clock::now(), &result, &frame.depth);
+  EXPECT_TRUE(fuser.hasPreviousDepth());
+  fuser.reset();
+  EXPECT_FALSE(fuser.hasPreviousDepth());
 }
 
 }  // namespace

@@ -59,8 +59,8 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   void publishParameterRanges();
   void workerLoop();
   /// The worker's settings: dynamic_reconfigure's changes handed to the
-  /// pipeline; returns the rotation lookup they ask for (empty: none).
-  RotationLookup applyNewSettings();
+  /// pipeline; returns the motion lookup they ask for (empty: none).
+  CameraMotionLookup applyNewSettings();
   void publishOutputs(const PipelineOutput& output);
   // Diagnostics (src/ros/diagnostics.cpp): the updater, its timer and the
   // warning when no set forms.

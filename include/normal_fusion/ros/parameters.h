@@ -112,6 +112,9 @@ struct NodeSettings {
   std::string fixed_frame = node_default::fixed_frame;
   /// Seconds to wait for the transform.
   double tf_timeout = node_default::tf_timeout;
+  /// Subscribe to `depth` (aligned with the image): with fixed_frame the
+  /// warm start follows the full motion (tf2's translation too) through it.
+  bool use_depth = node_default::use_depth;
 
   /// Each input averaged over the stream's frames before the solve (carried
   /// by the same rotation as the warm start); frames <= 1 = off.

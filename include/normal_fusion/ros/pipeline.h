@@ -12,8 +12,10 @@
 #include <tf2/buffer_core.h>
 
 #include <array>
+#include <cstddef>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/ros/conversions.h"
@@ -28,6 +30,7 @@ namespace node {
 struct TopicNames {
   std::string image = "image";
   std::string camera_info = "camera_info";
+  std::string depth = "depth";          ///< with use_depth
   std::vector<std::string> normals;     ///< normals_0 .. normals_{N-1}
   std::vector<std::string> confidence;  ///< confidence_0 .. confidence_{N-1}
 
@@ -43,6 +46,8 @@ struct InputSet {
   sensor_msgs::CameraInfoConstPtr camera_info;
   std::vector<sensor_msgs::ImageConstPtr> normals;
   std::vector<sensor_msgs::ImageConstPtr> confidence;
+  /// With use_depth: the depth aligned with the image (null = absent).
+  sensor_msgs::ImageConstPtr depth;
 };
 
 /// What the synchronizer queues per topic: an image or a camera_info.
@@ -53,17 +58,19 @@ struct QueuedMessage {
 
 /// Which input a synchronizer topic is.
 struct TopicRole {
-  enum Kind { kImage, kCameraInfo, kNormals, kConfidence } kind;
+  enum Kind { kImage, kCameraInfo, kNormals, kConfidence, kDepth } kind;
   int input = -1;    ///< normals / confidence: the input index
   std::string name;  ///< resolved topic name
 };
 
 /// The synchronizer topics for the settings: image, camera_info, normals_i,
-/// then confidence_i of the inputs that use one. Names are relative.
+/// confidence_i of the inputs that use one, then depth with use_depth. Names
+/// are relative.
 std::vector<TopicRole> topicRoles(const NodeSettings& settings);
 
 /// Which topics a set needs: image, camera_info and the inputs (with their
-/// confidence) that are not optional.
+/// confidence) that are not optional. The depth is optional: a set without
+/// it is warm-started by the rotation alone.
 std::vector<bool> requiredTopics(const std::vector<TopicRole>& roles,
                                  const NodeSettings& settings);
 
@@ -100,6 +107,36 @@ using RotationLookup =
 RotationLookup rotationLookupFromBuffer(const tf2::BufferCore& buffer,
                                         const std::string& fixed_frame);
 
+/// Looks up the full motion T_cur_prev of the camera frame `frame` between
+/// the stamps (X_cur = R X_prev + t, t in metres). Returns false with a
+/// reason when it is not known.
+using MotionLookup = std::function<bool(
+    const std::string& frame, const ros::Time& previous,
+    const ros::Time& current, Pose* T_cur_prev, std::string* reason)>;
+
+/// The same lookup as rotationLookupFromBuffer, with its translation.
+MotionLookup motionLookupFromBuffer(const tf2::BufferCore& buffer,
+                                    const std::string& fixed_frame);
+
+/// Where process() gets the camera's motion from: a rotation lookup (the
+/// translation unknown: the warm start follows the rotation alone), a full
+/// motion lookup (with use_depth and a depth, the warm start follows the
+/// full motion), or nothing (no compensation).
+struct CameraMotionLookup {
+  CameraMotionLookup() = default;
+  CameraMotionLookup(std::nullptr_t) {}      // NOLINT: no lookup
+  CameraMotionLookup(RotationLookup lookup)  // NOLINT: implicit on purpose
+      : rotation(std::move(lookup)) {}
+  CameraMotionLookup(MotionLookup lookup)  // NOLINT: implicit on purpose
+      : motion(std::move(lookup)) {}
+  explicit operator bool() const {
+    return static_cast<bool>(rotation) || static_cast<bool>(motion);
+  }
+
+  RotationLookup rotation;
+  MotionLookup motion;  ///< used when set
+};
+
 /// The stream settings in `settings` (solver, warm start, temporal
 /// averaging).
 StreamSettings streamSettingsFrom(const NodeSettings& settings);
@@ -112,6 +149,10 @@ struct PipelineOutput {
   /// Something the caller should log (e.g. the rotation lookup failed and the
   /// frame was cold-started); empty when all went as asked.
   std::string warning;
+  /// An input the set could do without was refused (e.g. a depth of another
+  /// size than the image: the warm start followed the rotation alone); worth
+  /// an error line, the frame was fused.
+  std::string error;
   /// Worth an info line: the stream (re)started here with a cold start, why,
   /// and under which budget; empty otherwise.
   std::string note;
@@ -128,9 +169,9 @@ class FusionPipeline {
 
   /// Converts, checks, solves (warm-started when allowed) and encodes one
   /// set. Throws InputError naming the topic and the problem, or
-  /// ParameterError; the warm-start state is then dropped. `rotation` may be
+  /// ParameterError; the warm-start state is then dropped. `motion` may be
   /// empty (no rotation compensation).
-  void process(const InputSet& set, const RotationLookup& rotation,
+  void process(const InputSet& set, const CameraMotionLookup& motion,
                bool make_vis, PipelineOutput* output);
 
   /// Forgets the previous frame: the next set cold-starts.
@@ -151,9 +192,12 @@ class FusionPipeline {
   std::vector<std::uint8_t> convertSet(const InputSet& set);
   /// The camera's rotation since the previous set, looked up only when the
   /// set continues the stream with a fixed_frame given.
-  FrameRotation rotationFor(const RotationLookup& rotation,
+  FrameRotation rotationFor(const CameraMotionLookup& motion,
                             const std::string& frame_id,
                             const ros::Time& stamp) const;
+  /// With use_depth, the set's depth in metres for the stream (null: none,
+  /// or refused with the reason in *error).
+  const ScalarMap* depthOf(const InputSet& set, std::string* error);
   /// Encodes the outputs and fills the statistics.
   void encodeOutputs(const std_msgs::Header& header, bool make_vis,
                      const StreamResult& result,
@@ -167,6 +211,7 @@ class FusionPipeline {
   std::vector<NormalMap> raw_normals_;     ///< per input, as received
   std::vector<ScalarMap> raw_confidence_;  ///< per input, as received
   PlanarImage resample_scratch_;  ///< resampleMap()'s masked source copy
+  ScalarMap depth_m_;             ///< the set's depth, metres
 };
 
 }  // namespace node
