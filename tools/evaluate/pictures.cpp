@@ -93,13 +93,14 @@ cv::Mat readBack(const std::string& path) {
   return picture;
 }
 
-/// The grid of the panels (3 columns) and a colour bar of the error scale.
-cv::Mat panelOf(const std::vector<cv::Mat>& panels) {
+/// The grid of the panels (3 columns) and, when asked, a colour bar of the
+/// error scale.
+cv::Mat panelOf(const std::vector<cv::Mat>& panels, bool error_bar = true) {
   // Grid of 3 columns and a colour bar of the error scale.
   const int columns = 3;
   const int cell_w = panels[0].cols, cell_h = panels[0].rows, gap = 6;
   const int rows = (static_cast<int>(panels.size()) + columns - 1) / columns;
-  const int bar_h = 64;
+  const int bar_h = error_bar ? 64 : 0;
   cv::Mat canvas(rows * (cell_h + gap) + bar_h + gap,
                  columns * (cell_w + gap) + gap, CV_8UC3,
                  cv::Scalar(255, 255, 255));
@@ -111,6 +112,7 @@ cv::Mat panelOf(const std::vector<cv::Mat>& panels) {
     cell.copyTo(canvas(cv::Rect(gap + c * (cell_w + gap),
                                 gap + r * (cell_h + gap), cell_w, cell_h)));
   }
+  if (!error_bar) return canvas;
   // Colour bar: 0 .. kHeatmapMaxDeg degrees.
   const int bar_x = gap + 10, bar_y = rows * (cell_h + gap) + gap;
   const int bar_w = canvas.cols - 2 * bar_x;
@@ -171,9 +173,12 @@ std::vector<std::string> writeExamples(const std::string& dir,
   panels.push_back(captioned(readBack(files[0]), "image", "guide"));
   panels.push_back(
       captioned(readBack(files[1]), "ground truth", "normals (colour-coded)"));
+  std::vector<cv::Mat> normal_panels = panels;
   for (std::size_t m = 0; m < methods.size(); ++m) {
     const std::string name = slug(methods[m].first);
     nf::io::writeNormalPicture(add(name + ".png"), methods[m].second);
+    normal_panels.push_back(
+        captioned(readBack(files.back()), methods[m].first, settings[m]));
     const std::string error_path = add("error_" + name + ".png");
     nf::io::writeHeatmap(error_path,
                          nf::angularErrorMap(methods[m].second, example.gt),
@@ -192,6 +197,14 @@ std::vector<std::string> writeExamples(const std::string& dir,
     throw nf::InputError("cannot write '" + panel_path + "'");
   }
   files.insert(files.begin(), panel_path);
+  if (example.normals_panel) {
+    const std::string normals_path =
+        (std::filesystem::path(dir) / ("normals_" + tag + ".png")).string();
+    if (!cv::imwrite(normals_path, panelOf(normal_panels, false))) {
+      throw nf::InputError("cannot write '" + normals_path + "'");
+    }
+    files.insert(files.begin() + 1, normals_path);
+  }
   return files;
 }
 
