@@ -98,7 +98,13 @@ cv::Mat readBack(const std::string& path) {
 cv::Mat panelOf(const std::vector<cv::Mat>& panels, bool error_bar = true) {
   // Grid of 3 columns and a colour bar of the error scale.
   const int columns = 3;
-  const int cell_w = panels[0].cols, cell_h = panels[0].rows, gap = 6;
+  // Cells at most kMaxCellWidth wide, so a large image's panel stays small.
+  constexpr int kMaxCellWidth = 400;
+  const double cell_scale =
+      std::min(1.0, static_cast<double>(kMaxCellWidth) / panels[0].cols);
+  const int cell_w = static_cast<int>(std::lround(panels[0].cols * cell_scale));
+  const int cell_h = static_cast<int>(std::lround(panels[0].rows * cell_scale));
+  const int gap = 6;
   const int rows = (static_cast<int>(panels.size()) + columns - 1) / columns;
   const int bar_h = error_bar ? 64 : 0;
   cv::Mat canvas(rows * (cell_h + gap) + bar_h + gap,
@@ -108,7 +114,8 @@ cv::Mat panelOf(const std::vector<cv::Mat>& panels, bool error_bar = true) {
     const int r = static_cast<int>(p) / columns,
               c = static_cast<int>(p) % columns;
     cv::Mat cell;
-    cv::resize(panels[p], cell, cv::Size(cell_w, cell_h));
+    cv::resize(panels[p], cell, cv::Size(cell_w, cell_h), 0, 0,
+               cell_scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
     cell.copyTo(canvas(cv::Rect(gap + c * (cell_w + gap),
                                 gap + r * (cell_h + gap), cell_w, cell_h)));
   }
