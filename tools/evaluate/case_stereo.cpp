@@ -119,7 +119,7 @@ StereoOutcome runStereoCase(const Options& options, Timers* timers) {
     const nf::ScalarMap depth =
         nf::stereo::depthFromDisparity(disparity, K.fx(), b);
     const nf::ScalarMap camera_depth =
-        syn::simulateDepthCamera(pair.left, syn::structuredLightCamera(),
+        syn::simulateDepthCamera(left, syn::structuredLightCamera(),
                                  noiseSeed(options, id, kCameraStream, 0.0));
     const double n = static_cast<double>(kStereoScenes.size());
     for (std::size_t k = 0; k < kCorrelationLags.size(); ++k) {
