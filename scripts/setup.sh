@@ -19,9 +19,10 @@ PACKAGES=(
   # The platform checks of scripts/run_tests.sh: other compilers, catkin_lint.
   g++-11 clang-14 libomp-14-dev catkin-lint
 )
-# Optional data: the ViSP image set (real and synthetic RGB-D sequences). GPL-2 data,
+# Optional data: the ViSP image set (real and synthetic RGB-D sequences; GPL-2 data) and
+# opencv-doc (Middlebury Aloe, the real stereo pair of evaluate), both
 # installed at run time and never copied into the repository.
-OPTIONAL_PACKAGES=(visp-images-data)
+OPTIONAL_PACKAGES=(visp-images-data opencv-doc)
 
 missing=()
 for pkg in "${PACKAGES[@]}" "${OPTIONAL_PACKAGES[@]}"; do

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "eval/scene_model.h"
 #include "eval/synthetic_internal.h"
 #include "normal_fusion/errors.h"
 
@@ -18,125 +19,9 @@ namespace normal_fusion {
 namespace synthetic {
 
 using namespace internal;  // NOLINT: the helpers shared with the noise models
+using namespace model;  // NOLINT: the scene description shared with the scenes
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kInf = std::numeric_limits<double>::infinity();
-/// Smallest ray parameter accepted as a hit (metres of z-depth).
-constexpr double kMinRayParameter = 1e-6;
-
-using Rgb = std::array<double, 3>;
-
-// ---------------------------------------------------------------------------
-// Scene description.
-
-enum class Pattern {
-  kUniform,        ///< base colour everywhere
-  kChecker,        ///< squares of side `period`, base and alt
-  kStripes,        ///< bands of width `period` across u, base and alt
-  kPosterStripes,  ///< base outside the rectangle; bands across v inside
-  kPosterChecker,  ///< base outside the rectangle; squares inside
-};
-
-/// Albedo as a function of 2-D surface coordinates (u, v) in metres.
-struct Material {
-  Pattern pattern = Pattern::kUniform;
-  Rgb base{{0.7, 0.7, 0.7}};
-  Rgb alt{{0.3, 0.3, 0.3}};
-  Rgb accent{{0.5, 0.5, 0.5}};
-  double period = 0.5;
-  double u0 = 0.0, u1 = 0.0, v0 = 0.0, v1 = 0.0;  ///< poster rectangle
-};
-
-/// Axis-aligned room seen from inside; faces -x, +x, -y, +y, -z, +z.
-struct Room {
-  Vec3 lo{{0.0, -2.5, 0.0}};
-  Vec3 hi{{6.0, 2.5, 2.8}};
-  std::array<int, 6> material{{0, 0, 0, 0, 0, 0}};
-};
-
-/// A solid box turned by `yaw` (radians) about the vertical axis.
-struct Box {
-  Vec3 center;
-  Vec3 half;
-  double yaw = 0.0;
-  int material = 0;
-};
-
-/// A solid vertical cylinder with flat caps.
-struct Cylinder {
-  double cx = 0.0, cy = 0.0, z0 = 0.0, z1 = 1.0, radius = 0.3;
-  int material = 0;
-};
-
-struct Sphere {
-  Vec3 center;
-  double radius = 0.3;
-  int material = 0;
-};
-
-/// Lambertian lighting: ambient + directional + point light with the soft
-/// fall-off intensity / (d^2 + d0^2).
-struct Lighting {
-  double ambient = 0.25;
-  Vec3 to_directional = normalized({{-0.5, 0.0, 0.8}});
-  double directional = 0.45;
-  Vec3 point_position{{2.5, 0.0, 2.2}};
-  double point = 1.6;
-  double point_falloff_d0 = 1.5;
-};
-
-struct Scene {
-  Room room;
-  std::vector<Box> boxes;
-  std::vector<Cylinder> cylinders;
-  std::vector<Sphere> spheres;
-  std::vector<Material> materials;
-  Lighting lighting;
-  Vec3 camera_centre{{0.4, 0.0, 1.5}};
-  double camera_yaw = 0.0;    ///< radians, positive turns left
-  double camera_pitch = 0.0;  ///< radians, positive looks down
-};
-
-Material uniform(const Rgb& base) {
-  Material m;
-  m.base = base;
-  return m;
-}
-
-Material patterned(Pattern pattern, const Rgb& base, const Rgb& alt,
-                   double period) {
-  Material m;
-  m.pattern = pattern;
-  m.base = base;
-  m.alt = alt;
-  m.period = period;
-  return m;
-}
-
-Material poster(Pattern pattern, const Rgb& base, const Rgb& alt,
-                const Rgb& accent, double period, double u0, double u1,
-                double v0, double v1) {
-  Material m = patterned(pattern, base, alt, period);
-  m.accent = accent;
-  m.u0 = u0;
-  m.u1 = u1;
-  m.v0 = v0;
-  m.v1 = v1;
-  return m;
-}
-
-int addMaterial(Scene* scene, const Material& m) {
-  scene->materials.push_back(m);
-  return static_cast<int>(scene->materials.size()) - 1;
-}
-
-/// A box standing on the floor (z = 0) with footprint centre (x, y).
-Box floorBox(double x, double y, double hx, double hy, double hz, double yaw,
-             int material) {
-  return Box{{{x, y, hz}}, {{hx, hy, hz}}, yaw, material};
-}
 
 /// Scene 0: room with boxes.
 Scene makeRoomWithBoxes() {
@@ -265,10 +150,16 @@ Scene makeScene(int scene_id) {
       return makeRoomWithCylinders();
     case 2:
       return makeClutteredRoom();
+    case kTexturedRoomScene:
+    case kTexturedCornerScene:
+      return makeTexturedScene(scene_id);
+    case kCurvedLargeScene:
+    case kCurvedSmallScene:
+      return makeCurvedScene(scene_id);
     default: {
       std::ostringstream msg;
       msg << "synthetic scene id " << scene_id << ": expected 0.."
-          << kNumScenes - 1;
+          << kNumSceneIds - 1;
       throw ParameterError(msg.str());
     }
   }
@@ -295,17 +186,6 @@ Pose poseFromCentre(const std::array<double, 9>& R_cam_world,
   pose.t = {{t[0], t[1], t[2]}};
   return pose;
 }
-
-// ---------------------------------------------------------------------------
-// Ray casting. A ray is o + s d with d = R^T K^-1 (u, v, 1), so that the ray
-// parameter s of a hit is its z-depth in the camera.
-
-struct SurfaceHit {
-  double s = kInf;
-  Vec3 normal{{0.0, 0.0, 0.0}};  ///< world frame, unit
-  double u = 0.0, v = 0.0;       ///< surface coordinates for the texture
-  int material = 0;
-};
 
 void intersectRoom(const Room& room, const Vec3& o, const Vec3& d,
                    SurfaceHit* hit) {
@@ -434,11 +314,27 @@ SurfaceHit trace(const Scene& scene, const Vec3& o, const Vec3& d) {
   for (const Sphere& sphere : scene.spheres) {
     intersectSphere(sphere, o, d, &hit);
   }
+  for (const Torus& torus : scene.tori) intersectTorus(torus, o, d, &hit);
   return hit;
 }
 
 inline bool oddCell(double u, double period) {
   return (static_cast<long long>(std::floor(u / period)) & 1LL) != 0;
+}
+
+/// A value in [0, 1] per cell (i, j): one of four levels from a hash, so
+/// neighbouring cells differ strongly (a high-contrast random texture).
+double cellNoise(double u, double v, double period) {
+  const auto i = static_cast<std::uint64_t>(
+      static_cast<std::int64_t>(std::floor(u / period)));
+  const auto j = static_cast<std::uint64_t>(
+      static_cast<std::int64_t>(std::floor(v / period)));
+  // SplitMix64's finalizer of the cell index.
+  std::uint64_t h = i * 0x9E3779B97F4A7C15ULL ^ (j + 0x632BE59BD9B4E019ULL);
+  h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  h = (h ^ (h >> 27)) * 0x94D049BB133111EBULL;
+  h ^= h >> 31;
+  return static_cast<double>(h & 3ULL) / 3.0;
 }
 
 Rgb albedo(const Material& m, double u, double v) {
@@ -458,6 +354,12 @@ Rgb albedo(const Material& m, double u, double v) {
       return oddCell(u - m.u0, m.period) != oddCell(v - m.v0, m.period)
                  ? m.accent
                  : m.alt;
+    case Pattern::kNoise: {
+      const double h = cellNoise(u, v, m.period);
+      return {{m.alt[0] + h * (m.base[0] - m.alt[0]),
+               m.alt[1] + h * (m.base[1] - m.alt[1]),
+               m.alt[2] + h * (m.base[2] - m.alt[2])}};
+    }
   }
   return m.base;
 }
@@ -565,6 +467,12 @@ Frame renderScene(int scene_id, int width, int height) {
 
 Frame renderScene(int scene_id, int width, int height, const Pose& pose) {
   return renderPrepared(makeScene(scene_id), width, height, pose);
+}
+
+Frame renderUntextured(int scene_id, int width, int height, const Pose& pose) {
+  Scene scene = makeScene(scene_id);
+  for (Material& m : scene.materials) m = uniform(m.base);
+  return renderPrepared(scene, width, height, pose);
 }
 
 std::vector<Frame> renderSequence(int scene_id, int width, int height,

@@ -41,6 +41,24 @@ struct Frame {
 /// light).
 constexpr int kNumScenes = 3;
 
+/// Scenes of what robots see, beyond the three rooms (evaluate's textured,
+/// curved, depth-camera and stereo cases):
+/// kTexturedRoomScene: checkerboards of 5, 12 and 30 cm cells on the walls
+///   and the floor, posters and a high-contrast random texture, boxes whose
+///   faces carry them, and creases of weak contrast (two faces of one albedo
+///   under the same light: a box turned by 45 degrees, a wedge on the floor).
+/// kTexturedCornerScene: a room corner seen at an angle, with the same
+///   kinds of texture on walls, floor and boxes, and weak creases alike.
+/// kCurvedLargeScene, kCurvedSmallScene: cylinders, spheres and tori (lying
+///   and standing) of large (0.2 - 0.6 m) and small (0.04 - 0.2 m) sizes in a
+///   room with a random texture on its walls (for stereo).
+constexpr int kTexturedRoomScene = 3;
+constexpr int kTexturedCornerScene = 4;
+constexpr int kCurvedLargeScene = 5;
+constexpr int kCurvedSmallScene = 6;
+/// Every scene id is in 0 .. kNumSceneIds - 1.
+constexpr int kNumSceneIds = 7;
+
 /// Depth quantization step of normalsFromNoisyDepth: one millimetre, as a
 /// 16-bit depth image in millimetres stores it.
 constexpr double kDepthQuantizationM = 0.001;
@@ -60,6 +78,10 @@ Frame renderScene(int scene_id, int width, int height);
 /// Renders scene `scene_id` from a given pose. Throws ParameterError when the
 /// rotation is not orthonormal or the camera centre lies outside the room.
 Frame renderScene(int scene_id, int width, int height, const Pose& pose);
+
+/// renderScene with every material's texture replaced by its base colour:
+/// the same geometry (normals, depth) without the texture's image edges.
+Frame renderUntextured(int scene_id, int width, int height, const Pose& pose);
 
 /// A slowly moving camera: `num_frames` views at `fps` (stamp k / fps), panning
 /// about the world's vertical axis by `degrees_per_frame` per frame and moving

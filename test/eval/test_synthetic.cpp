@@ -281,7 +281,7 @@ TEST(Synthetic, RenderingIsDeterministicAndUsesTheDefaultPose) {
 
 TEST(Synthetic, RejectsBadArguments) {
   EXPECT_THROW(synthetic::renderScene(-1, 32, 24), ParameterError);
-  EXPECT_THROW(synthetic::renderScene(synthetic::kNumScenes, 32, 24),
+  EXPECT_THROW(synthetic::renderScene(synthetic::kNumSceneIds, 32, 24),
                ParameterError);
   EXPECT_THROW(synthetic::renderScene(0, 0, 24), ParameterError);
   synthetic::Pose outside;  // identity pose: camera centre at the world origin,
@@ -578,12 +578,10 @@ TEST(Synthetic, SequenceMovesSlowlyAndConsistently) {
         if (!planarInterior(a, y, x)) continue;
         const Vec3 p_a = backProject(a, y, x);
         // World point X = R_a^T (p_a - t_a); camera b: p_b = R_b X + t_b.
-        const Vec3 rel{p_a[0] - a.pose.t[0],
-                       p_a[1] - a.pose.t[1],
+        const Vec3 rel{p_a[0] - a.pose.t[0], p_a[1] - a.pose.t[1],
                        p_a[2] - a.pose.t[2]};
         const Vec3 X = toWorld(a.pose, rel);
-        Vec3 p_b{b.pose.t[0], b.pose.t[1],
-                 b.pose.t[2]};
+        Vec3 p_b{b.pose.t[0], b.pose.t[1], b.pose.t[2]};
         for (int i = 0; i < 3; ++i) {
           for (int j = 0; j < 3; ++j) p_b[i] += Rb[3 * i + j] * X[j];
         }

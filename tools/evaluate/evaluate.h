@@ -12,10 +12,14 @@
 #include <utility>
 #include <vector>
 
+#include "eval/aloe.h"
 #include "eval/castle.h"
+#include "eval/depth_camera.h"
 #include "eval/peers.h"
+#include "eval/stereo.h"
 #include "eval/synthetic.h"
 #include "normal_fusion/bilateral.h"
+#include "normal_fusion/depth.h"
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/settings.h"
 #include "normal_fusion/solver.h"
@@ -67,6 +71,11 @@ struct Options {
   bool run_castle = true;
   bool run_stream = true;
   bool run_estimators = true;  ///< depth-to-normals estimators (with rgbd)
+  bool run_textured = true;    ///< textured scenes, depth-camera normals
+  bool run_curved = true;      ///< curved objects
+  bool run_depthcam = true;    ///< structured-light and time-of-flight
+  bool run_stereo = true;      ///< a rendered stereo pair through SGBM
+  bool run_aloe = true;        ///< Middlebury Aloe through SGBM
   // Depth-camera noise (depth and castle cases, depth input of the fusion).
   double depth_sigma_at_1m = 0.0015;
   double depth_dropout = 0.02;
@@ -84,6 +93,10 @@ struct Options {
   int stream_frames = 12;  ///< per sequence; 0: by --quick
   double stream_sigma = 0.4;
   nf::TemporalSettings temporal{20, 45.0};
+  // Robot-like inputs.
+  double curved_sigma = 0.3;       ///< paper noise of the curved case
+  double stereo_baseline_m = 0.1;  ///< the rendered pair's baseline
+  std::string aloe_dir = nf::aloe::kDefaultDirectory;
   bool help = false;
 };
 
@@ -287,6 +300,9 @@ struct Example {
   nf::ColorImage image;
   nf::NormalMap gt, input, regularizer;
   double sigma = 0.0;  ///< paper case: the noise level it belongs to
+  /// Also a panel of the normal maps (input, each method's result) beside
+  /// the panel of their errors.
+  bool normals_panel = false;
 };
 
 // --- cases_synthetic.cpp
@@ -305,6 +321,67 @@ CaseResult runDepthCase(const Options& options,
 std::vector<CaseResult> runFusionCase(
     const Options& options, const std::vector<nf::synthetic::Frame>& frames,
     Timers* timers);
+
+// --- cases_robot.cpp: textured scenes, curved objects, depth cameras
+
+/// Normals of a simulated depth camera's depth, computed as a driver user
+/// does: depth::depthToNormals at its defaults, `method`, with the camera's
+/// noise coefficient.
+nf::NormalMap cameraNormals(const nf::synthetic::Frame& frame,
+                            const nf::synthetic::DepthCameraModel& camera,
+                            nf::depth::NormalMethod method, std::uint64_t seed);
+std::string cameraText(const nf::synthetic::DepthCameraModel& camera);
+
+/// The textured scenes: one case per depth-normal method; the example is
+/// the first scene with plane_fit.
+std::vector<CaseResult> runTexturedCase(const Options& options,
+                                        Example* example, Timers* timers);
+/// Curved objects: paper noise and depth-camera normals.
+std::vector<CaseResult> runCurvedCase(const Options& options, Timers* timers);
+/// Structured light and time of flight, each with both methods, on the
+/// rooms of --scenes.
+std::vector<CaseResult> runDepthCameraCase(
+    const Options& options, const std::vector<nf::synthetic::Frame>& frames,
+    Timers* timers);
+
+// --- case_stereo.cpp: rendered stereo and Middlebury Aloe
+
+/// Scene ids of the stereo case.
+extern const std::array<int, 3> kStereoScenes;
+
+/// The rendered stereo case and how correlated its depth error is.
+struct StereoOutcome {
+  bool ran = false;
+  CaseResult result;
+  /// Correlation of the depth error over z^2 between pixels 1, 4 and 16
+  /// apart along a row, mean over the scenes: stereo's and, on the same
+  /// scenes, the structured-light camera's.
+  std::array<double, 3> correlation_stereo{}, correlation_camera{};
+  double depth_share = 0.0;  ///< pixels with a stereo depth, mean
+  Example example;           ///< the first scene
+};
+
+StereoOutcome runStereoCase(const Options& options, Timers* timers);
+
+/// The Aloe case, or a note why it was skipped.
+struct AloeOutcome {
+  bool ran = false;
+  std::string note;
+  CaseResult result;
+  int width = 0, height = 0;
+  double gt_share = 0.0;     ///< pixels with ground-truth normals
+  double depth_share = 0.0;  ///< of them, with an SGBM depth
+  /// Mean angle (deg) between the ground truth's plane fits of two window
+  /// sizes: what the whole-pixel steps leave in it.
+  double gt_window_change_deg = 0.0;
+  /// Mean angle (deg) that the same steps and fit leave on a rendered scene
+  /// against its exact normals.
+  double gt_floor_deg = 0.0;
+  double depth_min_m = 0.0, depth_max_m = 0.0;  ///< of the ground truth
+  Example example;
+};
+
+AloeOutcome runAloeCase(const Options& options, Timers* timers);
 
 // --- case_castle.cpp
 
@@ -415,6 +492,10 @@ struct Results {
   CastleOutcome castle;
   std::vector<StreamResult> streams;
   EstimatorsOutcome estimators;
+  std::vector<CaseResult> textured, curved, depthcam;
+  Example textured_example;
+  StereoOutcome stereo;
+  AloeOutcome aloe;
   std::vector<CaseResult> all;  ///< every case with tables, in report order
   /// The paper's claim: the sigmas where the regularizer is not ahead of the
   /// best bilateral filter.
@@ -431,5 +512,7 @@ struct OutputFiles {
 /// list of files.
 std::string markdown(const Options& options, const Results& results,
                      const OutputFiles& files, double total_seconds);
+/// Sections 7 - 11 of results.md: the cases of what robots feed the fusion.
+std::string robotCasesText(const Options& options, const Results& results);
 
 }  // namespace evaluate

@@ -4,7 +4,8 @@
 // each filter at its best setting of a small grid for each case.
 //
 //   evaluate --output-dir DIR
-//            [--cases paper,depth,fusion,castle,stream,estimators]
+//            [--cases paper,depth,fusion,castle,stream,estimators,
+//                     textured,curved,depthcam,stereo,aloe]
 //            [--width 320 --height 240] [--scenes 0,1,2] [--quick]
 //            [solver options]
 //
@@ -18,7 +19,13 @@
 // averaged over time; a synthetic sequence and Castle's frames), and
 // "estimators" (depth-to-normals: the library's methods and OpenCV's
 // RgbdNormals on the depth case's and the castle case's noisy depth, alone,
-// regularized and smoothed by the fast global smoother).
+// regularized and smoothed by the fast global smoother). What robots feed
+// the fusion: "textured" (strong textures on planes, weak creases; normals
+// of structured-light depth), "curved" (cylinders, spheres, tori; paper
+// noise and depth normals), "depthcam" (structured-light and time-of-flight
+// depth with flying pixels and dropouts, normals by central_difference and
+// plane_fit), "stereo" (a rendered textured pair through OpenCV's SGBM) and
+// "aloe" (Middlebury's Aloe pair through SGBM against its ground truth).
 //
 // Writes DIR/results.md (the tables, also printed to stdout),
 // DIR/results.csv (per scene), DIR/filter_grid.csv (every filter setting),
@@ -32,8 +39,9 @@
 // The parts: options.cpp (the command line), scores.cpp (scores and the
 // filters compared), case_runner.cpp (one case over its scenes and the grid
 // search), cases_synthetic.cpp, case_castle.cpp, case_stream.cpp and
-// case_depth_estimators.cpp (the cases), report.cpp and markdown.cpp (tables,
-// CSV, results.md), pictures.cpp (plot and example pictures).
+// case_depth_estimators.cpp, cases_robot.cpp and case_stereo.cpp (the
+// cases), report.cpp, markdown.cpp and markdown_robot.cpp (tables, CSV,
+// results.md), pictures.cpp (plot and example pictures).
 #include <chrono>
 #include <exception>
 #include <filesystem>
@@ -41,6 +49,7 @@
 #include <iostream>
 #include <opencv2/core.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "evaluate/evaluate.h"
@@ -67,12 +76,31 @@ std::vector<StreamResult> runStreams(const Options& options) {
   return streams;
 }
 
+/// The cases of what robots feed the fusion.
+void runRobotCases(const Options& options,
+                   const std::vector<nf::synthetic::Frame>& frames,
+                   Results* r) {
+  if (options.run_textured) {
+    r->textured = runTexturedCase(options, &r->textured_example, &r->timers);
+  }
+  if (options.run_curved) r->curved = runCurvedCase(options, &r->timers);
+  if (options.run_depthcam) {
+    r->depthcam = runDepthCameraCase(options, frames, &r->timers);
+  }
+  if (options.run_stereo) r->stereo = runStereoCase(options, &r->timers);
+  if (options.run_aloe) {
+    r->aloe = runAloeCase(options, &r->timers);
+    if (!r->aloe.ran)
+      std::cerr << "evaluate: aloe case " << r->aloe.note << "\n";
+  }
+}
+
 /// Runs the cases the options ask for.
 Results runCases(const Options& options) {
   // Ground truth of every scene.
   std::vector<nf::synthetic::Frame> frames;
   if (options.run_paper || options.run_depth || options.run_fusion ||
-      options.run_estimators) {
+      options.run_estimators || options.run_depthcam) {
     for (int scene : options.scenes) {
       frames.push_back(
           nf::synthetic::renderScene(scene, options.width, options.height));
@@ -94,10 +122,16 @@ Results runCases(const Options& options) {
   if (options.run_estimators) {
     r.estimators = runEstimatorsCase(options, frames);
   }
+  runRobotCases(options, frames, &r);
   r.all = r.paper;
   if (options.run_depth) r.all.push_back(r.depth);
   r.all.insert(r.all.end(), r.fusion.begin(), r.fusion.end());
   if (r.castle.ran) r.all.push_back(r.castle.result);
+  for (const auto* cases : {&r.textured, &r.curved, &r.depthcam}) {
+    r.all.insert(r.all.end(), cases->begin(), cases->end());
+  }
+  if (r.stereo.ran) r.all.push_back(r.stereo.result);
+  if (r.aloe.ran) r.all.push_back(r.aloe.result);
 
   // The paper's claim: ahead of the best bilateral filter at every sigma.
   for (const CaseResult& c : r.paper) {
@@ -132,6 +166,17 @@ OutputFiles writeFiles(const Options& options, const Results& r) {
   if (r.castle.ran) {
     for (const std::string& f : writeExamples(
              options.output_dir, r.castle.example, r.castle.result, options)) {
+      files.examples.push_back(f);
+    }
+  }
+  const std::vector<std::pair<const Example*, const CaseResult*>> robot = {
+      {&r.textured_example, r.textured.empty() ? nullptr : &r.textured.front()},
+      {&r.stereo.example, r.stereo.ran ? &r.stereo.result : nullptr},
+      {&r.aloe.example, r.aloe.ran ? &r.aloe.result : nullptr}};
+  for (const auto& example : robot) {
+    if (example.second == nullptr) continue;
+    for (const std::string& f : writeExamples(
+             options.output_dir, *example.first, *example.second, options)) {
       files.examples.push_back(f);
     }
   }

@@ -269,7 +269,8 @@ std::string markdown(const Options& options, const Results& results,
                      const OutputFiles& files, double total_seconds) {
   return setupText(options, results, total_seconds) + paperText(results) +
          casesText(options, results) + streamsText(options, results) +
-         estimatorsText(options, results) + summaryText(results, files);
+         estimatorsText(options, results) + robotCasesText(options, results) +
+         summaryText(results, files);
 }
 
 }  // namespace evaluate

@@ -69,6 +69,8 @@ void parseCases(const std::string& option, const std::string& list,
   options->run_paper = options->run_depth = options->run_fusion =
       options->run_castle = options->run_stream = options->run_estimators =
           false;
+  options->run_textured = options->run_curved = options->run_depthcam =
+      options->run_stereo = options->run_aloe = false;
   for (const std::string& item : splitCommas(option, list)) {
     if (item == "paper") {
       options->run_paper = true;
@@ -82,10 +84,21 @@ void parseCases(const std::string& option, const std::string& list,
       options->run_stream = true;
     } else if (item == "estimators") {
       options->run_estimators = true;
+    } else if (item == "textured") {
+      options->run_textured = true;
+    } else if (item == "curved") {
+      options->run_curved = true;
+    } else if (item == "depthcam") {
+      options->run_depthcam = true;
+    } else if (item == "stereo") {
+      options->run_stereo = true;
+    } else if (item == "aloe") {
+      options->run_aloe = true;
     } else {
       throw UsageError(option +
-                       ": expected paper, depth, fusion, castle, stream or "
-                       "estimators, got '" +
+                       ": expected paper, depth, fusion, castle, stream, "
+                       "estimators, textured, curved, depthcam, stereo or "
+                       "aloe, got '" +
                        item + "'");
     }
   }
@@ -187,6 +200,12 @@ bool applyCaseOption(const std::string& option, const ValueFn& value,
     setInt(option, value(), 0, 100000, &o->temporal.frames);
   } else if (option == "--temporal-gate-deg") {
     setDouble(option, value(), 0.1, 180.0, &o->temporal.gate_degrees);
+  } else if (option == "--curved-sigma") {
+    setDouble(option, value(), 0.0, 10.0, &o->curved_sigma);
+  } else if (option == "--stereo-baseline") {
+    setDouble(option, value(), 0.01, 0.5, &o->stereo_baseline_m);
+  } else if (option == "--aloe-dir") {
+    o->aloe_dir = value();
   } else {
     return false;
   }
@@ -225,7 +244,7 @@ void completeAndCheck(const GivenOptions& given, Options* options) {
 void printUsage(std::ostream& out) {
   const Options o;
   out << "Usage: evaluate --output-dir DIR [--cases "
-         "paper,depth,fusion,castle]\n"
+         "paper,depth,fusion,castle,...]\n"
          "                [--width W --height H] [--scenes 0,1,2] [--quick]\n"
          "                [solver options]\n"
          "\n"
@@ -246,7 +265,8 @@ void printUsage(std::ostream& out) {
          "  --output-dir DIR      where the results go (created if missing)\n"
          "  --cases LIST          any of paper, depth, fusion, castle, "
          "stream,\n"
-         "                        estimators [all]\n"
+         "                        estimators, textured, curved, depthcam,\n"
+         "                        stereo, aloe [all]\n"
          "  --width N, --height N synthetic image size [320 x 240; 160 x 120 "
          "with --quick]\n"
          "  --scenes LIST         comma-separated scene ids in 0.."
@@ -285,6 +305,13 @@ void printUsage(std::ostream& out) {
       << "  --castle-tolerance X  model vs depth agreement for ground truth, "
          "metres ["
       << o.castle_tolerance_m << "]\n"
+      << "  --curved-sigma X      paper noise of the curved case ["
+      << o.curved_sigma << "]\n"
+      << "  --stereo-baseline X   the rendered stereo pair's baseline, metres ["
+      << o.stereo_baseline_m << "]\n"
+      << "  --aloe-dir DIR        Middlebury Aloe (aloeL.jpg, aloeR.jpg, "
+         "aloeGT.png)\n"
+      << "                        [" << o.aloe_dir << "]\n"
       << "\n"
          "Solver options (defaults in brackets):\n";
   nf::cli::printSolverOptions(out, nf::SolverSettings());

@@ -93,13 +93,20 @@ cv::Mat readBack(const std::string& path) {
   return picture;
 }
 
-/// The grid of the panels (3 columns) and a colour bar of the error scale.
-cv::Mat panelOf(const std::vector<cv::Mat>& panels) {
+/// The grid of the panels (3 columns) and, when asked, a colour bar of the
+/// error scale.
+cv::Mat panelOf(const std::vector<cv::Mat>& panels, bool error_bar = true) {
   // Grid of 3 columns and a colour bar of the error scale.
   const int columns = 3;
-  const int cell_w = panels[0].cols, cell_h = panels[0].rows, gap = 6;
+  // Cells at most kMaxCellWidth wide, so a large image's panel stays small.
+  constexpr int kMaxCellWidth = 400;
+  const double cell_scale =
+      std::min(1.0, static_cast<double>(kMaxCellWidth) / panels[0].cols);
+  const int cell_w = static_cast<int>(std::lround(panels[0].cols * cell_scale));
+  const int cell_h = static_cast<int>(std::lround(panels[0].rows * cell_scale));
+  const int gap = 6;
   const int rows = (static_cast<int>(panels.size()) + columns - 1) / columns;
-  const int bar_h = 64;
+  const int bar_h = error_bar ? 64 : 0;
   cv::Mat canvas(rows * (cell_h + gap) + bar_h + gap,
                  columns * (cell_w + gap) + gap, CV_8UC3,
                  cv::Scalar(255, 255, 255));
@@ -107,10 +114,12 @@ cv::Mat panelOf(const std::vector<cv::Mat>& panels) {
     const int r = static_cast<int>(p) / columns,
               c = static_cast<int>(p) % columns;
     cv::Mat cell;
-    cv::resize(panels[p], cell, cv::Size(cell_w, cell_h));
+    cv::resize(panels[p], cell, cv::Size(cell_w, cell_h), 0, 0,
+               cell_scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
     cell.copyTo(canvas(cv::Rect(gap + c * (cell_w + gap),
                                 gap + r * (cell_h + gap), cell_w, cell_h)));
   }
+  if (!error_bar) return canvas;
   // Colour bar: 0 .. kHeatmapMaxDeg degrees.
   const int bar_x = gap + 10, bar_y = rows * (cell_h + gap) + gap;
   const int bar_w = canvas.cols - 2 * bar_x;
@@ -171,9 +180,12 @@ std::vector<std::string> writeExamples(const std::string& dir,
   panels.push_back(captioned(readBack(files[0]), "image", "guide"));
   panels.push_back(
       captioned(readBack(files[1]), "ground truth", "normals (colour-coded)"));
+  std::vector<cv::Mat> normal_panels = panels;
   for (std::size_t m = 0; m < methods.size(); ++m) {
     const std::string name = slug(methods[m].first);
     nf::io::writeNormalPicture(add(name + ".png"), methods[m].second);
+    normal_panels.push_back(
+        captioned(readBack(files.back()), methods[m].first, settings[m]));
     const std::string error_path = add("error_" + name + ".png");
     nf::io::writeHeatmap(error_path,
                          nf::angularErrorMap(methods[m].second, example.gt),
@@ -192,6 +204,14 @@ std::vector<std::string> writeExamples(const std::string& dir,
     throw nf::InputError("cannot write '" + panel_path + "'");
   }
   files.insert(files.begin(), panel_path);
+  if (example.normals_panel) {
+    const std::string normals_path =
+        (std::filesystem::path(dir) / ("normals_" + tag + ".png")).string();
+    if (!cv::imwrite(normals_path, panelOf(normal_panels, false))) {
+      throw nf::InputError("cannot write '" + normals_path + "'");
+    }
+    files.insert(files.begin() + 1, normals_path);
+  }
   return files;
 }
 
