@@ -114,6 +114,14 @@ struct SolverSettings {
   /// before the solve. Lower values act like a larger lambda for sparse
   /// inputs, whose pixels are nearly all holes (docs/accuracy.md).
   double hole_link_weight = settings_default::hole_link_weight;
+  /// Dynamic guidance (docs/method.md): the weight of each link becomes
+  ///   w = w_img + dynamic_guidance (1 - w_img) exp(-(|n_p - n_q| / s)^2),
+  /// s the chord of dynamic_guidance_deg, from the outer iterate n0 and
+  /// updated at every accepted outer step, so that a texture edge where the
+  /// normals agree smooths again while a crease still cuts. In [0, 1], 0 =
+  /// off (the image weights alone).
+  double dynamic_guidance = settings_default::dynamic_guidance;
+  double dynamic_guidance_deg = settings_default::dynamic_guidance_deg;
 
   /// Local refinement of a warm start. The pixels that the warm start does
   /// not predict (NaN or zero normals: uncovered by a warp, or at an edge of

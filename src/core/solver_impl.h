@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "normal_fusion/detail/deadline.h"
+#include "normal_fusion/detail/dynamic_guidance.h"
 #include "normal_fusion/detail/kernel_backend.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
@@ -174,6 +175,7 @@ class SolverImpl {
   std::vector<internal::PreparedLevel> levels_;
   PlanarImage coarse_result_;
   internal::EdgeWeightScratch edge_scratch_;
+  internal::DynamicGuidance guidance_;  ///< runLevel(): guided edge weights
   Clock::time_point solve_start_;
   bool cancelled_ = false;  ///< cancelled(): this solve saw the request
   int threads_ = 1;

@@ -31,13 +31,25 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
       innerParams(level, finest ? settings_.step_balance : kCoarseStepBalance);
   const internal::EnergyTerms terms = energyTerms();
   const Clock::time_point level_start = Clock::now();
+  // Dynamic guidance: the level's weights (levels_ owns it) follow n0, and E
+  // is the weighted E plus the guidance's correction (docs/method.md).
+  internal::DynamicGuidance* guidance = nullptr;
+  double correction = 0.0;
+  if (settings_.dynamic_guidance > 0.0) {
+    guidance = &guidance_;
+    guidance->begin(levels_[static_cast<std::size_t>(&level - levels_.data())],
+                    levels_[0], internal::guidanceTerms(settings_));
+    correction = guidance->reweight(s.n0, threads_);
+  }
+  // best: the weighted E at n0, which a step must not exceed; reached: E.
   double best = backend_->energy(level, terms, s.n0, threads_);
+  double reached = best + correction;
   const double energy_seconds = secondsSince(level_start);
   // What closing an outer step costs (normalize + energy), for the budget.
   double finish_seconds = 1.5 * secondsSince(level_start);
   if (finest) {
-    report.initial_energy = best;
-    recordEnergy(report, best);
+    report.initial_energy = reached;
+    recordEnergy(report, reached);
   }
   s.n = s.n0;
   s.nbar = s.n0;
@@ -77,12 +89,21 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
     }
     bool converged = false;
     if (e <= best) {
-      const double decrease = (best - e) / std::max(best, 1e-30);
       best = e;
       std::swap(s.n0, candidate_);
       s.n = s.n0;
       s.nbar = s.n0;
-      if (finest) recordEnergy(report, e);
+      if (guidance != nullptr) {
+        // The weights of the new n0, and E there under them.
+        const Clock::time_point reweight_start = Clock::now();
+        correction = guidance->reweight(s.n0, threads_);
+        best = backend_->energy(level, terms, s.n0, threads_);
+        finish_seconds += secondsSince(reweight_start);
+      }
+      const double energy_now = best + correction;
+      const double decrease = (reached - energy_now) / std::max(reached, 1e-30);
+      reached = energy_now;
+      if (finest) recordEnergy(report, energy_now);
       converged = decrease < tolerance;
     } else if (finest) {
       report.rejected_outer_steps += 1;
@@ -96,6 +117,7 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
       break;
     }
   }
+  if (guidance != nullptr) guidance->end();
   if (finest) remaining_inner_ = remaining;
 }
 

@@ -65,6 +65,7 @@ std::size_t SolverImpl::bytesHeld() const {
   for (const internal::PreparedLevel& level : levels_) {
     bytes += level.bytesHeld();
   }
+  bytes += guidance_.bytesHeld();
   return bytes;
 }
 
