@@ -105,10 +105,16 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   }
   writeOutput(out, W, H, L);
   if (!cancelled_) {
-    out.converging = use_warm ? warm_converging_ && !report.converged &&
-                                    report.rejected_outer_steps == 0
-                              : deadline_.active() && report.budget_exhausted &&
-                                    !report.converged;
+    // A warm state converges when an outer step meets the tolerance or a
+    // whole one is rejected (a step the budget cut to a few iterations
+    // says little).
+    const bool whole_step_rejected =
+        report.rejected_outer_steps > 0 &&
+        report.inner_iterations >= settings_.inner_iterations;
+    out.converging =
+        use_warm ? warm_converging_ && !report.converged && !whole_step_rejected
+                 : deadline_.active() && report.budget_exhausted &&
+                       !report.converged;
   }
   report.still_converging = out.converging;
   finishReport(report, start);
