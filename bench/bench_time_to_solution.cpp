@@ -69,7 +69,9 @@ std::vector<Schedule> schedules() {
       {"preconditioned, 20 inner, 3-level pyramid", 20, true, 3, 1.0},
       {"plain CP, 50 inner, balance 0.25", 50, false, 1, 0.25},
       {"preconditioned, 50 inner, balance 0.5", 50, true, 1, 0.5},
-      {"preconditioned, 50 inner, balance 0.25 (default)", 50, true, 1, 0.25},
+      {"preconditioned, 50 inner, balance 0.25 (the old default)", 50, true, 1,
+       0.25},
+      {"preconditioned, 10 inner, balance 0.25 (default)", 10, true, 1, 0.25},
       {"preconditioned, 50 inner, balance 0.125", 50, true, 1, 0.125},
       {"preconditioned, 20 inner, balance 0.25", 20, true, 1, 0.25},
   };

@@ -168,6 +168,11 @@ struct SolverSettings {
   /// some pixels have no valid input), n > 1 = exactly n levels (fewer if the
   /// image gets too small).
   int pyramid_levels = settings_default::pyramid_levels;
+  /// Coarse-to-fine also carries the duals (the smoothness duals copied,
+  /// the data duals halved, as the coarser level's data weights are doubled)
+  /// to the finer level, which then starts near its equilibrium; false: the
+  /// duals restart from 0 at every level.
+  bool prolong_duals = settings_default::prolong_duals;
 
   // Execution.
   int num_threads =

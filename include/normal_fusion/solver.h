@@ -33,6 +33,11 @@ struct SolverState {
   PlanarImage dual_h;                  ///< p_h, 3 planes
   PlanarImage dual_v;                  ///< p_v, 3 planes
   std::vector<PlanarImage> dual_data;  ///< q_l, 3 planes each
+  /// The normals come from a solve that its time budget cut short (a
+  /// stream's anytime cold start): a warm start under a time budget then
+  /// iterates the whole image instead of refining locally, until an outer
+  /// step no longer lowers the energy or the tolerance is met.
+  bool converging = false;
 
   /// True when the state can warm-start a problem of this size and input count.
   bool compatible(int width, int height, int num_inputs) const;
@@ -87,6 +92,8 @@ struct SolveReport {
   /// A stream's cold start under time_budget_ms: the solve ran under
   /// SolverSettings::cold_start_budget_ms instead.
   bool cold_start_budget_used = false;
+  /// The state handed on is not yet converged (SolverState::converging).
+  bool still_converging = false;
   int pyramid_levels = 1;
   int num_inputs = 0;
   int valid_pixels = 0;   ///< pixels with at least one usable observation

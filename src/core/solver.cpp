@@ -62,10 +62,13 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     preallocateRefinement(W, H, L);
   }
   report.warm_started = use_warm;
+  warm_converging_ = use_warm && out.converging;
   remaining_inner_ = settings_.max_total_inner_iterations;
 
-  // Coarse-to-fine on a cold start.
-  const int num_levels = use_warm ? 1 : buildPyramid();
+  // Coarse-to-fine on a cold start (always under a budget: the coarser
+  // levels' result, upsampled, is a far better anytime answer than the raw
+  // inputs).
+  const int num_levels = use_warm ? 1 : buildPyramid(deadline_.active());
   releaseUnusedLevels(num_levels);
   report.pyramid_levels = num_levels;
   if (cancelled()) {
@@ -91,9 +94,29 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     if (!cancelled() && levelRuns(warm_finest, report)) {
       runLevel(level, li == 0, report);
     }
-    if (li > 0) coarse_result_ = state_.n0;
+    if (li > 0) {
+      coarse_result_ = state_.n0;
+      if (settings_.prolong_duals) {
+        coarse_p_h_ = state_.p_h;
+        coarse_p_v_ = state_.p_v;
+        coarse_q_ = state_.q;
+      }
+    }
   }
   writeOutput(out, W, H, L);
+  if (!cancelled_) {
+    // A warm state converges when an outer step meets the tolerance or a
+    // whole one is rejected (a step the budget cut to a few iterations
+    // says little).
+    const bool whole_step_rejected =
+        report.rejected_outer_steps > 0 &&
+        report.inner_iterations >= settings_.inner_iterations;
+    out.converging =
+        use_warm ? warm_converging_ && !report.converged && !whole_step_rejected
+                 : deadline_.active() && report.budget_exhausted &&
+                       !report.converged;
+  }
+  report.still_converging = out.converging;
   finishReport(report, start);
 }
 
@@ -120,10 +143,12 @@ bool SolverImpl::prepare(const FusionProblem& problem, SolveReport& report) {
   return !cancelled();
 }
 
-int SolverImpl::buildPyramid() {
+int SolverImpl::buildPyramid(bool budgeted) {
   const PreparedLevel& finest = levels_[0];
   int wanted = settings_.pyramid_levels;
-  if (wanted == 0) {
+  if (wanted == 0 && budgeted) {
+    wanted = kAutoPyramidLevels;
+  } else if (wanted == 0) {
     const double missing =
         1.0 - static_cast<double>(finest.valid_pixels) /
                   (static_cast<double>(finest.width) * finest.height);
@@ -149,24 +174,35 @@ void SolverImpl::startCold(const PreparedLevel& level, bool from_coarser) {
   } else {
     internal::initializeCold(level, settings_.visibility, state_.n0, threads_);
   }
+  if (from_coarser && settings_.prolong_duals) {
+    internal::upsampleDuals(coarse_p_h_, coarse_p_v_, coarse_q_, level, state_,
+                            threads_);
+    return;
+  }
   state_.p_h.fill(0.0f);
   state_.p_v.fill(0.0f);
   for (PlanarImage& q : state_.q) q.fill(0.0f);
 }
 
-bool SolverImpl::levelRuns(bool warm_finest, SolveReport& report) const {
+bool SolverImpl::levelRuns(bool warm_finest, SolveReport& report) {
   if (!warm_finest) return true;
-  if (settings_.warm_refine_iterations > 0 && deadline_.active()) {
+  if (settings_.warm_refine_iterations > 0 && deadline_.active() &&
+      !warm_converging_) {
     // Live (a time budget and the local refinement): the frame's time goes
     // to the refinement, and the frame ends when it does. The whole-image
     // steps after it gained nothing and, started near the deadline, overran
     // it (docs/experiments/2026-11.md). Their energies are not measured.
+    // A state still converging (SolverState::converging) is iterated on
+    // over the whole image instead, as far as the budget allows.
     return false;
   }
   if (!deadline_.allowsLevel(level_seconds_)) {
     // A warm start under a time budget without the refinement: what is left
     // of the budget would not hold a whole-image step, which is left out
-    // (its energies are then not measured).
+    // (its energies are then not measured). A state still converging halves
+    // the estimate, so that one slow measurement does not leave every later
+    // frame without steps.
+    if (warm_converging_) level_seconds_ *= 0.5;
     report.budget_exhausted = true;
     return false;
   }

@@ -85,14 +85,15 @@ class SolverImpl {
 
   /// Prepares the finest level and checks it; false when cancelled meanwhile.
   bool prepare(const FusionProblem& problem, SolveReport& report);
-  /// The coarser levels of a cold start; returns how many levels there are.
-  int buildPyramid();
+  /// The coarser levels of a cold start (automatic: always when `budgeted`);
+  /// returns how many levels there are.
+  int buildPyramid(bool budgeted);
   /// Starts a level without a warm start: the upsampled coarser result or
   /// the cold start, duals 0.
   void startCold(const internal::PreparedLevel& level, bool from_coarser);
   /// Whether the whole-image steps of a level run (a warm start's finest
   /// level under a time budget may leave them out).
-  bool levelRuns(bool warm_finest, SolveReport& report) const;
+  bool levelRuns(bool warm_finest, SolveReport& report);
   /// The accepted normals and the duals handed to `out`.
   void writeOutput(SolverState& out, int width, int height, int num_inputs);
   /// Step sizes for L data terms; throws ParameterError when explicit steps
@@ -174,10 +175,16 @@ class SolverImpl {
   /// left).
   std::vector<internal::PreparedLevel> levels_;
   PlanarImage coarse_result_;
+  /// The duals of the last coarser level (SolverSettings::prolong_duals).
+  PlanarImage coarse_p_h_, coarse_p_v_;
+  std::vector<PlanarImage> coarse_q_;
   internal::EdgeWeightScratch edge_scratch_;
   internal::DynamicGuidance guidance_;  ///< runLevel(): guided edge weights
   Clock::time_point solve_start_;
   bool cancelled_ = false;  ///< cancelled(): this solve saw the request
+  /// This solve warm-starts from a state still converging: whole-image
+  /// steps instead of the local refinement.
+  bool warm_converging_ = false;
   int threads_ = 1;
   int remaining_inner_ = 0;
   /// The local refinement's thread count per step (kept across frames).

@@ -233,6 +233,84 @@ void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
   }
 }
 
+namespace {
+
+/// v <- v / max(1, |v| / radius); radius 0 gives 0.
+inline void clampToRadius(float& a, float& b, float& c, float radius) {
+  const float len = std::sqrt(a * a + b * b + c * c);
+  const float s = len > radius ? (radius > 0.0f ? radius / len : 0.0f) : 1.0f;
+  a *= s;
+  b *= s;
+  c *= s;
+}
+
+/// The coarse dual at coarse link or pixel (xc, yc), 0 outside the image
+/// and on the links past the last column (`along_x`) or row.
+inline float coarseDual(const PlanarImage& src, int c, int xc, int yc,
+                        bool link_h, bool link_v) {
+  if (xc < 0 || yc < 0 || xc >= src.width() || yc >= src.height()) return 0.0f;
+  if ((link_h && xc + 1 == src.width()) || (link_v && yc + 1 == src.height())) {
+    return 0.0f;
+  }
+  return src.at(c, yc, xc);
+}
+
+/// One dual image carried up, clamped to `radius` (a plane of the fine
+/// level). A smoothness dual (link_h or link_v) is linear along its links:
+/// the fine link that crosses a coarse link takes its dual, the one inside
+/// a coarse pixel the mean of its two coarse links, so that the fine
+/// divergence is half the coarse one at every pixel (as the halved data
+/// duals are); across its links and for the data duals it is constant.
+void upsampleDual(const PlanarImage& src, float scale, const float* radius,
+                  bool link_h, bool link_v, PlanarImage& dst, int threads) {
+  const int W = dst.width(), H = dst.height();
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      // Along the links: odd fine index 2k + 1 crosses coarse link k, even
+      // 2k lies between coarse links k - 1 and k.
+      const int along = link_h ? x : y;
+      const int k = along / 2;
+      float v[3];
+      for (int c = 0; c < 3; ++c) {
+        if (!link_h && !link_v) {
+          v[c] = coarseDual(src, c, x / 2, y / 2, false, false);
+        } else if (along % 2 == 1) {
+          v[c] = link_h ? coarseDual(src, c, k, y / 2, true, false)
+                        : coarseDual(src, c, x / 2, k, false, true);
+        } else {
+          v[c] =
+              0.5f * (link_h ? coarseDual(src, c, k - 1, y / 2, true, false) +
+                                   coarseDual(src, c, k, y / 2, true, false)
+                             : coarseDual(src, c, x / 2, k - 1, false, true) +
+                                   coarseDual(src, c, x / 2, k, false, true));
+        }
+        v[c] *= scale;
+      }
+      clampToRadius(v[0], v[1], v[2], radius[i]);
+      const bool outside = (link_h && x + 1 == W) || (link_v && y + 1 == H);
+      for (int c = 0; c < 3; ++c) dst.plane(c)[i] = outside ? 0.0f : v[c];
+    }
+  }
+}
+
+}  // namespace
+
+void upsampleDuals(const PlanarImage& coarse_p_h, const PlanarImage& coarse_p_v,
+                   const std::vector<PlanarImage>& coarse_q,
+                   const PreparedLevel& fine, IterationState& state,
+                   int threads) {
+  upsampleDual(coarse_p_h, 1.0f, fine.edge_weight.plane(0), true, false,
+               state.p_h, threads);
+  upsampleDual(coarse_p_v, 1.0f, fine.edge_weight.plane(1), false, true,
+               state.p_v, threads);
+  for (int l = 0; l < fine.num_inputs; ++l) {
+    upsampleDual(coarse_q[l], 0.5f, fine.data_weight[l].plane(0), false, false,
+                 state.q[l], threads);
+  }
+}
+
 /// n <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
 /// tangent plane).
 void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads) {

@@ -166,7 +166,8 @@ void SolverImpl::startWarm(const PreparedLevel& level, SolverState& out,
   }
   // Pixels whose warm normal the current inputs contradict (content that
   // changed or moved unlike the warp assumed) count as unknown.
-  const bool refine = settings_.warm_refine_iterations > 0 && !cancelled();
+  const bool refine =
+      settings_.warm_refine_iterations > 0 && !warm_converging_ && !cancelled();
   if (refine) {
     report.inconsistent_pixels = internal::markInconsistentPixels(
         level, s.n0, settings_.local_radius, unknown_, threads_);

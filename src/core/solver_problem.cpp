@@ -102,6 +102,7 @@ void SolverState::clear() {
   dual_h = PlanarImage();
   dual_v = PlanarImage();
   dual_data.clear();
+  converging = false;
 }
 
 std::size_t SolverState::bytesHeld() const {

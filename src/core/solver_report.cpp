@@ -61,7 +61,9 @@ std::size_t SolverImpl::bytesHeld() const {
       edge_scratch_.bytesHeld() + refine_.active.bytesHeld() +
       refine_.gathered.bytesHeld() + internal::bytesHeld(edge_scratch_map_) +
       internal::bytesHeld(fill_pending_) + internal::bytesHeld(unknown_) +
-      internal::bytesHeld(refine_.iterate_saved);
+      internal::bytesHeld(refine_.iterate_saved) + coarse_p_h_.bytesHeld() +
+      coarse_p_v_.bytesHeld();
+  for (const PlanarImage& q : coarse_q_) bytes += q.bytesHeld();
   for (const internal::PreparedLevel& level : levels_) {
     bytes += level.bytesHeld();
   }
@@ -74,6 +76,9 @@ void SolverImpl::fitBuffers(int W, int H) {
   state_.fit(W, H, threads_);
   internal::releaseIfOversized(candidate_, 3 * N);
   internal::releaseIfOversized(coarse_result_, 3 * N);
+  internal::releaseIfOversized(coarse_p_h_, 3 * N);
+  internal::releaseIfOversized(coarse_p_v_, 3 * N);
+  for (PlanarImage& q : coarse_q_) internal::releaseIfOversized(q, 3 * N);
   for (std::vector<float>* v :
        {&edge_scratch_.mag_h, &edge_scratch_.mag_v, &edge_scratch_.plane,
         &edge_scratch_.blurred, &edge_scratch_.blur}) {

@@ -123,10 +123,12 @@ bool StreamFuser::applyRotation(const CameraIntrinsics& K,
   try {
     if (settings_.warm_start) {
       // With the local refinement the duals are reset (as good, and
-      // cheaper: see DualWarp).
+      // cheaper: see DualWarp); a state still converging keeps them for its
+      // whole-image steps.
       const DualWarp dual_warp = settings_.dual_warp.value_or(
-          solver_.settings().warm_refine_iterations > 0 ? DualWarp::kReset
-                                                        : DualWarp::kRotate);
+          solver_.settings().warm_refine_iterations > 0 && !state_.converging
+              ? DualWarp::kReset
+              : DualWarp::kRotate);
       const int threads = solver_.settings().num_threads;
       if (rotation.has_translation && has_previous_depth_) {
         Pose T_cur_prev;

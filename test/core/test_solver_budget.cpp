@@ -111,5 +111,36 @@ TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
   expectUnit(restart.normals);
 }
 
+/// A stream's cold start that its budget cuts short hands on a converging
+/// state; the warm frame after it iterates the whole image (no local
+/// refinement) and, with the tolerance met, hands on a converged one.
+TEST(Solver, ABudgetCutColdStartGoesOnConvergingInTheWarmFrames) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings = twoHundredIterationsUnderABudget();
+  settings.cold_start_budget_ms = 2000.0;
+  Solver solver(settings);
+  SolveReport report;
+  SolverState stream;
+  spendTheFrameBudget(solver);
+  solver.solve(problem, stream, true, report);
+  EXPECT_TRUE(report.budget_exhausted);
+  EXPECT_TRUE(stream.converging);
+  EXPECT_TRUE(report.still_converging);
+  // A warm frame with time to spare: whole-image steps until the tolerance.
+  settings.relative_tolerance = 1e-2;
+  solver.setSettings(settings);
+  solver.solve(problem, stream, true, report);
+  EXPECT_TRUE(report.warm_started);
+  EXPECT_GT(report.inner_iterations, 0);
+  EXPECT_EQ(report.refine_iterations, 0);
+  EXPECT_TRUE(report.converged);
+  EXPECT_FALSE(stream.converging);
+  // Converged: the next warm frame refines locally, as live frames do.
+  spendTheFrameBudget(solver);
+  solver.solve(problem, stream, true, report);
+  EXPECT_EQ(report.inner_iterations, 0);
+}
+
 }  // namespace
 }  // namespace normal_fusion

@@ -144,6 +144,7 @@ TEST(StreamFuser, TheGapOfTheProcessingItselfDoesNotEndTheStream) {
   StreamSettings settings = streamSettings();
   settings.warm_start_max_gap = 0.0;
   settings.solver.max_total_inner_iterations = 2000;
+  settings.solver.inner_iterations = 50;
   settings.solver.max_outer_iterations = 100;
   settings.solver.relative_tolerance = 0.0;
   const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);

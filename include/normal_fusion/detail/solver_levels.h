@@ -25,6 +25,16 @@ void initializeCold(const PreparedLevel& level, VisibilityMode mode,
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
                      VisibilityMode mode, PlanarImage& n, int threads);
 
+/// The duals of a coarser level's result carried to the finer `fine`
+/// (piecewise constant: each fine link takes the dual of the coarse link or
+/// pixel it lies in): the smoothness duals copied, the data duals halved (the
+/// coarser data weights are doubled), each clamped to the fine level's
+/// weight; the links past the last column and row 0.
+void upsampleDuals(const PlanarImage& coarse_p_h, const PlanarImage& coarse_p_v,
+                   const std::vector<PlanarImage>& coarse_q,
+                   const PreparedLevel& fine, IterationState& state,
+                   int threads);
+
 /// out <- n / |n| per pixel (the projection onto the sphere; |n| >= 1 on the
 /// tangent plane).
 void normalizeInto(const PlanarImage& n, PlanarImage& out, int threads);

@@ -1,0 +1,251 @@
+// The cold solve against OpenCV's fast global smoother (FGS, ximgproc): on
+// the same frames (640x480, the synthetic scenes, two inputs: the paper's
+// noise at sigma 0.5 and the normals of a noisy depth map), the median time
+// of the default solve, of the defaults before the shorter outer steps and
+// the duals carried through the pyramid (spelled out below), and of FGS on the
+// inputs' mean at its best setting of peers::settingsGrid(), their ratios, the
+// PSNR of each, and the default solve's time to solution (within 1e-3 of the
+// energy of a converged solve). Solver options on the command line change the
+// default solve only (for comparisons). Prints a table; not a test.
+//
+//   bench_cold_solve [--runs 5] [--threads 2] [--width 640 --height 480]
+//                    [--scenes 0,1,2] [solver options]
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench_util.h"
+#include "eval/synthetic.h"
+#include "normal_fusion/errors.h"
+#include "normal_fusion/metrics.h"
+#include "normal_fusion/solver.h"
+#include "normal_fusion/solver_options.h"
+#ifdef NF_HAVE_XIMGPROC
+#include "eval/peers.h"
+#endif
+
+namespace nf = normal_fusion;
+
+namespace {
+
+struct Options {
+  int runs = 5, threads = 2, width = 640, height = 480;
+  std::vector<int> scenes{0, 1, 2};
+  nf::SolverSettings settings;  ///< the default solve (with any options)
+};
+
+std::vector<int> parseList(const std::string& text) {
+  std::vector<int> values;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) values.push_back(std::atoi(item.c_str()));
+  return values;
+}
+
+bool parseOptions(int argc, char** argv, Options& o) {
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string key = argv[i], value = argv[i + 1];
+    if (key == "--runs") {
+      o.runs = std::atoi(value.c_str());
+    } else if (key == "--threads") {
+      o.threads = std::atoi(value.c_str());
+    } else if (key == "--width") {
+      o.width = std::atoi(value.c_str());
+    } else if (key == "--height") {
+      o.height = std::atoi(value.c_str());
+    } else if (key == "--scenes") {
+      o.scenes = parseList(value);
+    } else if (nf::cli::isSolverOption(key)) {
+      nf::cli::applySolverOption(key, value, o.settings);
+    } else {
+      std::fprintf(stderr, "bench_cold_solve: unknown option %s\n",
+                   key.c_str());
+      return false;
+    }
+  }
+  o.settings.num_threads = o.threads;
+  o.settings.validate();
+  return true;
+}
+
+/// The defaults before the shorter outer steps and the carried duals.
+nf::SolverSettings oldDefaults(int threads) {
+  nf::SolverSettings s;
+  s.inner_iterations = 50;
+  s.max_outer_iterations = 40;
+  s.max_total_inner_iterations = 1000;
+  s.relative_tolerance = 1e-4;
+  s.pyramid_levels = 0;
+  s.prolong_duals = false;
+  s.num_threads = threads;
+  return s;
+}
+
+/// A converged solve: its energy is E* of the time to solution.
+nf::SolverSettings convergedSettings(int threads) {
+  nf::SolverSettings s = oldDefaults(threads);
+  s.step_balance = 0.125;
+  s.relative_tolerance = 1e-7;
+  s.max_total_inner_iterations = 6000;
+  s.max_outer_iterations = 6000;
+  return s;
+}
+
+struct Frame {
+  nf::FusionProblem problem;
+  nf::NormalMap normals_gt;
+};
+
+Frame makeFrame(int scene, int width, int height) {
+  const nf::synthetic::Frame rendered =
+      nf::synthetic::renderScene(scene, width, height);
+  Frame frame;
+  frame.normals_gt = rendered.normals_gt;
+  frame.problem.image = rendered.image;
+  frame.problem.K = rendered.K;
+  nf::NormalInput noisy, depth;
+  noisy.normals =
+      nf::synthetic::addPaperNoise(rendered.normals_gt, 0.5, 300 + scene);
+  depth.normals =
+      nf::synthetic::normalsFromNoisyDepth(rendered, 0.0015, 0.02, 400 + scene);
+  frame.problem.inputs = {noisy, depth};
+  return frame;
+}
+
+struct Timed {
+  double ms = 0.0;    ///< median
+  double psnr = 0.0;  ///< of the last run
+  nf::SolveReport report;
+};
+
+Timed timeSolve(const Frame& frame, const nf::SolverSettings& settings,
+                int runs) {
+  nf::Solver solver(settings);
+  Timed t;
+  nf::NormalMap out;
+  t.ms = nf::bench::median(nf::bench::timesMs(
+      runs, [&] { out = solver.solve(frame.problem, &t.report); }));
+  t.psnr = nf::psnr(out, frame.normals_gt);
+  return t;
+}
+
+/// Milliseconds until the report's energy is within `rel` of `e_star`, -1
+/// when never.
+double timeToSolution(const nf::SolveReport& r, double e_star, double rel) {
+  for (std::size_t k = 0; k < r.energies.size(); ++k) {
+    if (r.energies[k] <= e_star * (1.0 + rel)) {
+      return 1000.0 * r.energy_seconds[k];
+    }
+  }
+  return -1.0;
+}
+
+#ifdef NF_HAVE_XIMGPROC
+/// The inputs' mean (normalized), what FGS filters.
+nf::NormalMap meanOfInputs(const nf::FusionProblem& problem) {
+  const nf::NormalMap& first = problem.inputs[0].normals;
+  const int W = first.width(), H = first.height();
+  nf::NormalMap mean(W, H, 3);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int i = 0; i < W * H; ++i) {
+    float v[3] = {0.0f, 0.0f, 0.0f};
+    for (const nf::NormalInput& input : problem.inputs) {
+      const float a[3] = {input.normals.plane(0)[i], input.normals.plane(1)[i],
+                          input.normals.plane(2)[i]};
+      if (!std::isfinite(a[0] + a[1] + a[2])) continue;
+      for (int c = 0; c < 3; ++c) v[c] += a[c];
+    }
+    const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int c = 0; c < 3; ++c) {
+      mean.plane(c)[i] = len > 1e-6f ? v[c] / len : nan;
+    }
+  }
+  return mean;
+}
+
+/// FGS at its best setting of the grid on this frame, timed.
+Timed timeFgs(const Frame& frame, int runs, std::string& label) {
+  const nf::NormalMap mean = meanOfInputs(frame.problem);
+  nf::peers::PeerSetting best;
+  double best_psnr = -1.0;
+  for (const nf::peers::PeerSetting& s :
+       nf::peers::settingsGrid(nf::peers::PeerFilter::kFastGlobalSmoother)) {
+    const double p = nf::psnr(
+        nf::peers::applyPeer(mean, frame.problem.image, s), frame.normals_gt);
+    if (p > best_psnr) {
+      best_psnr = p;
+      best = s;
+    }
+  }
+  label = best.label();
+  Timed t;
+  t.psnr = best_psnr;
+  t.ms = nf::bench::median(nf::bench::timesMs(runs, [&] {
+    (void)nf::peers::applyPeer(mean, frame.problem.image, best);
+  }));
+  return t;
+}
+#endif
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  try {
+    if (!parseOptions(argc, argv, o)) return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_cold_solve: %s\n", e.what());
+    return 2;
+  }
+  std::printf("%s\n", nf::bench::machineLine().c_str());
+  std::printf(
+      "cold solve, %dx%d, two inputs (paper noise 0.5, normals of noisy "
+      "depth), %d threads, medians of %d runs\n\n",
+      o.width, o.height, o.threads, o.runs);
+  std::printf(
+      "| scene | default ms | PSNR | iterations (coarse) | old default ms | "
+      "PSNR | FGS ms | PSNR | default / FGS | old / FGS | old / default | "
+      "default within 1e-3 ms | old within 1e-3 ms |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::vector<double> ratios_fgs, ratios_old, tts, tts_old;
+  for (int scene : o.scenes) {
+    const Frame frame = makeFrame(scene, o.width, o.height);
+    const Timed now = timeSolve(frame, o.settings, o.runs);
+    const Timed old = timeSolve(frame, oldDefaults(o.threads), o.runs);
+    nf::SolveReport converged;
+    nf::Solver(convergedSettings(o.threads)).solve(frame.problem, &converged);
+    const double e_star =
+        std::min(converged.final_energy,
+                 std::min(now.report.final_energy, old.report.final_energy));
+    Timed fgs;
+    std::string fgs_label = "not built";
+#ifdef NF_HAVE_XIMGPROC
+    fgs = timeFgs(frame, o.runs, fgs_label);
+#endif
+    const double tt = timeToSolution(now.report, e_star, 1e-3);
+    const double tt_old = timeToSolution(old.report, e_star, 1e-3);
+    std::printf(
+        "| %d | %.1f | %.2f | %d (%d) | %.1f | %.2f | %.1f (%s) | %.2f | "
+        "%.1fx | %.1fx | %.1fx | %.1f | %.1f |\n",
+        scene, now.ms, now.psnr, now.report.inner_iterations,
+        now.report.coarse_inner_iterations, old.ms, old.psnr, fgs.ms,
+        fgs_label.c_str(), fgs.psnr, now.ms / fgs.ms, old.ms / fgs.ms,
+        old.ms / now.ms, tt, tt_old);
+    ratios_fgs.push_back(now.ms / fgs.ms);
+    ratios_old.push_back(old.ms / now.ms);
+    tts.push_back(tt);
+    tts_old.push_back(tt_old);
+  }
+  std::printf(
+      "\nmedian over the scenes: default / FGS %.1fx, old default / default "
+      "%.1fx, time to solution within 1e-3: default %.1f ms, old default "
+      "%.1f ms (-1: not reached)\n",
+      nf::bench::median(ratios_fgs), nf::bench::median(ratios_old),
+      nf::bench::median(tts), nf::bench::median(tts_old));
+  return 0;
+}
