@@ -57,6 +57,17 @@ void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
   const std::size_t values = 2 * level.edge_weight.pixelCount();
   std::copy(level.edge_weight.data(), level.edge_weight.data() + values,
             image_weight_.data());
+  const std::size_t pixels = level.edge_weight.pixelCount();
+  if (observed_.capacity() < finest.edge_weight.pixelCount()) {
+    observed_.reserve(finest.edge_weight.pixelCount());
+  }
+  observed_.assign(pixels, 0);
+  for (int l = 0; l < level.num_inputs; ++l) {
+    const float* c = level.data_weight[l].plane(0);
+    for (std::size_t i = 0; i < pixels; ++i) {
+      if (c[i] > 0.0f) observed_[i] = 1;
+    }
+  }
 }
 
 double DynamicGuidance::reweight(const PlanarImage& normals, int threads) {
@@ -69,6 +80,7 @@ double DynamicGuidance::reweight(const PlanarImage& normals, int threads) {
   float* w_h = level.edge_weight.plane(0);
   float* w_v = level.edge_weight.plane(1);
   const GuidanceTerms terms = terms_;
+  const unsigned char* observed = observed_.data();
   double* sums = row_sums_.data();
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
@@ -77,12 +89,21 @@ double DynamicGuidance::reweight(const PlanarImage& normals, int threads) {
     for (int x = 0; x < W; ++x) {
       const std::size_t i = row + x;
       // The links past the last column and row couple nothing (d = 0).
-      w_h[i] = x + 1 < W
-                   ? guidedLink(terms, img_h[i], n, i, i + 1, correction)
-                   : img_h[i] + terms.mu * std::max(0.0f, 1.0f - img_h[i]);
-      w_v[i] = y + 1 < H
-                   ? guidedLink(terms, img_v[i], n, i, i + W, correction)
-                   : img_v[i] + terms.mu * std::max(0.0f, 1.0f - img_v[i]);
+      // Links with an unobserved end keep w_img (mu = 0 there).
+      if (x + 1 >= W) {
+        w_h[i] = img_h[i] + terms.mu * std::max(0.0f, 1.0f - img_h[i]);
+      } else if (observed[i] && observed[i + 1]) {
+        w_h[i] = guidedLink(terms, img_h[i], n, i, i + 1, correction);
+      } else {
+        w_h[i] = img_h[i];
+      }
+      if (y + 1 >= H) {
+        w_v[i] = img_v[i] + terms.mu * std::max(0.0f, 1.0f - img_v[i]);
+      } else if (observed[i] && observed[i + W]) {
+        w_v[i] = guidedLink(terms, img_v[i], n, i, i + W, correction);
+      } else {
+        w_v[i] = img_v[i];
+      }
     }
     sums[y] = correction;
   }
@@ -101,7 +122,8 @@ void DynamicGuidance::end() {
 }
 
 std::size_t DynamicGuidance::bytesHeld() const {
-  return image_weight_.bytesHeld() + internal::bytesHeld(row_sums_);
+  return image_weight_.bytesHeld() + internal::bytesHeld(row_sums_) +
+         internal::bytesHeld(observed_);
 }
 
 }  // namespace internal

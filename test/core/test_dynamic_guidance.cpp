@@ -127,6 +127,7 @@ TEST(GuidancePenalty, IsTheIntegralOfTheKernelOverTheHuberPenalty) {
   }
 }
 
+// Links with an end in a hole (no input there) keep the image weight.
 TEST(DynamicGuidance, WeightsFollowTheNormalsAndTheImageWeightsComeBack) {
   internal::PreparedLevel level;
   level.width = 9;
@@ -136,6 +137,17 @@ TEST(DynamicGuidance, WeightsFollowTheNormalsAndTheImageWeightsComeBack) {
     level.edge_weight.data()[i] += 0.5f;  // w_img in [0, 1]
   }
   const PlanarImage image_weight = level.edge_weight;
+  // One input observing every pixel but a 2 x 2 hole at x 3..4, y 2..3.
+  level.num_inputs = 1;
+  level.data_weight = {PlanarImage(9, 7, 1, 1.0f)};
+  const auto in_hole = [](int x, int y) {
+    return x >= 3 && x <= 4 && y >= 2 && y <= 3;
+  };
+  for (int y = 0; y < 7; ++y) {
+    for (int x = 0; x < 9; ++x) {
+      if (in_hole(x, y)) level.data_weight[0].at(0, y, x) = 0.0f;
+    }
+  }
   NormalMap normals(9, 7, 3);
   std::mt19937_64 rng(4);
   std::normal_distribution<float> noise(0.0f, 0.3f);
@@ -162,6 +174,11 @@ TEST(DynamicGuidance, WeightsFollowTheNormalsAndTheImageWeightsComeBack) {
         }
         chord = std::sqrt(chord);
         const double w_img = image_weight.at(d, y, x);
+        if (xq < 9 && yq < 7 && (in_hole(x, y) || in_hole(xq, yq))) {
+          // An end in the hole: the image weight, no correction.
+          EXPECT_EQ(level.edge_weight.at(d, y, x), image_weight.at(d, y, x));
+          continue;
+        }
         const double k = 0.6 * (1.0 - w_img);
         const double phi = std::exp(-(chord / 0.35) * (chord / 0.35));
         EXPECT_NEAR(level.edge_weight.at(d, y, x), w_img + k * phi, 1e-6);

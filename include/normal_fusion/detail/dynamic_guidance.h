@@ -64,7 +64,11 @@ class DynamicGuidance {
  private:
   PreparedLevel* level_ = nullptr;
   GuidanceTerms terms_;
-  PlanarImage image_weight_;      ///< w_img of the level (planes h, v)
+  PlanarImage image_weight_;  ///< w_img of the level (planes h, v)
+  /// Per pixel: some input observes it (c_l > 0). A link with an
+  /// unobserved end keeps w_img: there the normals are the smoothing's own
+  /// fill-in, and only the image tells where it may bend.
+  std::vector<unsigned char> observed_;
   std::vector<double> row_sums_;  ///< reweight(): one partial sum per row
 };
 
