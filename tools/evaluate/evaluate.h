@@ -23,6 +23,7 @@
 #include "normal_fusion/metrics.h"
 #include "normal_fusion/settings.h"
 #include "normal_fusion/solver.h"
+#include "normal_fusion/solver_options.h"
 #include "normal_fusion/temporal.h"
 #include "normal_fusion/types.h"
 
@@ -50,10 +51,7 @@ constexpr double kHeatmapMaxDeg = 45.0;
 constexpr int kBilateralFamily = 0;
 
 /// A malformed command line: unknown option, missing or bad value.
-class UsageError : public std::runtime_error {
- public:
-  explicit UsageError(const std::string& what) : std::runtime_error(what) {}
-};
+using UsageError = nf::cli::UsageError;
 
 struct Options {
   std::string output_dir;

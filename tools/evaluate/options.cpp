@@ -336,24 +336,13 @@ Options parseArguments(int argc, char** argv) {
   Options options;
   nf::SolverSettings& s = options.settings;
   GivenOptions given;
-  for (int i = 1; i < argc; ++i) {
-    std::string option = argv[i];
-    std::string inline_value;
-    bool has_inline_value = false;
-    if (option.rfind("--", 0) != 0) {
-      throw UsageError("unexpected argument '" + option +
-                       "' (options start with --; see --help)");
-    }
-    const std::size_t equals = option.find('=');
-    if (equals != std::string::npos) {
-      inline_value = option.substr(equals + 1);
-      option = option.substr(0, equals);
-      has_inline_value = true;
-    }
+  nf::cli::ArgumentCursor arguments(argc, argv);
+  while (arguments.next()) {
+    const std::string& option = arguments.option();
     // Flags without a value.
     if (option == "--help" || option == "--no-edges" || option == "--quick" ||
         option == "--no-fusion" || option == "--no-estimators") {
-      if (has_inline_value) throw UsageError(option + " takes no value");
+      arguments.expectNoValue();
       if (option == "--help") options.help = true;
       if (option == "--no-edges") s.edges.enabled = false;
       if (option == "--quick") options.quick = true;
@@ -361,11 +350,7 @@ Options parseArguments(int argc, char** argv) {
       if (option == "--no-estimators") options.run_estimators = false;
       continue;
     }
-    const ValueFn value = [&]() -> std::string {
-      if (has_inline_value) return inline_value;
-      if (i + 1 >= argc) throw UsageError(option + " needs a value");
-      return argv[++i];
-    };
+    const ValueFn value = [&]() -> std::string { return arguments.value(); };
     if (nf::cli::isSolverOption(option)) {
       try {
         nf::cli::applySolverOption(option, value(), s);
