@@ -9,22 +9,10 @@
 #include <functional>
 #include <new>
 
+#include "allocation_counter.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/warp.h"
 #include "test_util.h"
-
-namespace {
-std::atomic<long> g_allocations{0};
-std::atomic<bool> g_counting{false};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace normal_fusion {
 namespace {
@@ -41,13 +29,7 @@ FusionProblem cylinderTwoInputs() {
   return problem;
 }
 
-long allocationsDuring(const std::function<void()>& work) {
-  g_allocations.store(0);
-  g_counting.store(true);
-  work();
-  g_counting.store(false);
-  return g_allocations.load();
-}
+using test::allocationsDuring;
 
 TEST(Allocations, NonePerFrameOnceRunning) {
   for (SolverBackend backend :
