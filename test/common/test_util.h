@@ -78,6 +78,16 @@ inline NormalMap noisy(const NormalMap& n, double sigma, std::uint64_t seed) {
   return out;
 }
 
+/// Same size and every value equal, NaN equal to NaN.
+inline bool identical(const PlanarImage& a, const PlanarImage& b) {
+  if (!a.sameSize(b) || a.channels() != b.channels()) return false;
+  for (std::size_t i = 0; i < a.pixelCount() * a.channels(); ++i) {
+    const float u = a.data()[i], v = b.data()[i];
+    if (!(u == v || (std::isnan(u) && std::isnan(v)))) return false;
+  }
+  return true;
+}
+
 /// Mean squared distance |a - b|^2 over pixels valid in both.
 inline double meanSquaredError(const NormalMap& a, const NormalMap& b) {
   double sum = 0.0;

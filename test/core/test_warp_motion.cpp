@@ -11,6 +11,7 @@
 #include "normal_fusion/errors.h"
 #include "normal_fusion/warp.h"
 #include "normal_fusion/warp_motion.h"
+#include "test_util.h"
 
 namespace normal_fusion {
 namespace {
@@ -43,16 +44,6 @@ SolverState randomState(int W, int H, int L, unsigned seed) {
 bool isNaNPixel(const NormalMap& normals, int x, int y) {
   return std::isnan(normals.at(0, y, x)) && std::isnan(normals.at(1, y, x)) &&
          std::isnan(normals.at(2, y, x));
-}
-
-/// Every value equal, NaN equal to NaN.
-bool sameBits(const PlanarImage& a, const PlanarImage& b) {
-  if (!a.sameSize(b) || a.channels() != b.channels()) return false;
-  for (std::size_t k = 0; k < a.pixelCount() * a.channels(); ++k) {
-    const float p = a.data()[k], q = b.data()[k];
-    if (!(p == q || (std::isnan(p) && std::isnan(q)))) return false;
-  }
-  return true;
 }
 
 TEST(MotionWarp, TranslationOfAFrontoParallelPlaneShiftsTheMap) {
@@ -208,17 +199,18 @@ TEST(MotionWarp, FastWarpEqualsTheReference) {
   for (int threads : {1, 3}) {
     SolverState fast = previous;
     warpStateByMotion(fast, depth, frames[1].K, T, scratch, threads);
-    EXPECT_TRUE(sameBits(fast.normals, reference.normals)) << threads;
-    EXPECT_TRUE(sameBits(fast.dual_h, reference.dual_h)) << threads;
-    EXPECT_TRUE(sameBits(fast.dual_v, reference.dual_v)) << threads;
-    EXPECT_TRUE(sameBits(fast.dual_data[1], reference.dual_data[1]));
+    EXPECT_TRUE(test::identical(fast.normals, reference.normals)) << threads;
+    EXPECT_TRUE(test::identical(fast.dual_h, reference.dual_h)) << threads;
+    EXPECT_TRUE(test::identical(fast.dual_v, reference.dual_v)) << threads;
+    EXPECT_TRUE(test::identical(fast.dual_data[1], reference.dual_data[1]));
   }
   // Reset duals: the same normals, zero duals.
   SolverState reset = previous;
   warpStateByMotion(reset, depth, frames[1].K, T, scratch, 2, DualWarp::kReset);
-  EXPECT_TRUE(sameBits(reset.normals, reference.normals));
-  EXPECT_TRUE(sameBits(reset.dual_h, PlanarImage(48, 36, 3, 0.0f)));
-  EXPECT_TRUE(sameBits(reset.dual_data[0], PlanarImage(48, 36, 3, 0.0f)));
+  EXPECT_TRUE(test::identical(reset.normals, reference.normals));
+  EXPECT_TRUE(test::identical(reset.dual_h, PlanarImage(48, 36, 3, 0.0f)));
+  EXPECT_TRUE(
+      test::identical(reset.dual_data[0], PlanarImage(48, 36, 3, 0.0f)));
   // Some pixels predicted, some not (disoccluded, entering the view).
   int unknown = 0;
   for (int y = 0; y < 36; ++y) {

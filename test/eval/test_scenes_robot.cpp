@@ -14,6 +14,7 @@
 #include "eval/synthetic.h"
 #include "eval/synthetic_internal.h"
 #include "normal_fusion/errors.h"
+#include "test_util.h"
 
 namespace normal_fusion {
 namespace {
@@ -29,15 +30,6 @@ double angleDeg(const Vec3& a, const Vec3& b) {
   return std::acos(std::max(-1.0, std::min(1.0, c))) * kRadToDeg;
 }
 
-bool identical(const PlanarImage& a, const PlanarImage& b) {
-  if (!a.sameSize(b) || a.channels() != b.channels()) return false;
-  for (std::size_t i = 0; i < a.pixelCount() * a.channels(); ++i) {
-    const float u = a.data()[i], v = b.data()[i];
-    if (!(u == v || (std::isnan(u) && std::isnan(v)))) return false;
-  }
-  return true;
-}
-
 constexpr std::array<int, 4> kNewScenes{
     {synthetic::kTexturedRoomScene, synthetic::kTexturedCornerScene,
      synthetic::kCurvedLargeScene, synthetic::kCurvedSmallScene}};
@@ -47,9 +39,9 @@ TEST(RobotScenes, TextureChangesTheImageButNotTheGeometry) {
     const Frame textured = synthetic::renderScene(id, 96, 72);
     const Frame plain =
         synthetic::renderUntextured(id, 96, 72, synthetic::defaultPose(id));
-    EXPECT_TRUE(identical(textured.normals_gt, plain.normals_gt)) << id;
-    EXPECT_TRUE(identical(textured.depth, plain.depth)) << id;
-    EXPECT_FALSE(identical(textured.image, plain.image)) << id;
+    EXPECT_TRUE(test::identical(textured.normals_gt, plain.normals_gt)) << id;
+    EXPECT_TRUE(test::identical(textured.depth, plain.depth)) << id;
+    EXPECT_FALSE(test::identical(textured.image, plain.image)) << id;
   }
 }
 
@@ -214,9 +206,9 @@ TEST(DepthCamera, NoiseGrowsWithDepthSquaredAndStaysOnTheSteps) {
   // Standard deviation of the error in units of a z^2 (steps add q^2 / 12).
   EXPECT_NEAR(std::sqrt(sum2 / n), 1.0, 0.15);
   EXPECT_TRUE(
-      identical(noisy, synthetic::simulateDepthCamera(frame, camera, 7)));
+      test::identical(noisy, synthetic::simulateDepthCamera(frame, camera, 7)));
   EXPECT_FALSE(
-      identical(noisy, synthetic::simulateDepthCamera(frame, camera, 8)));
+      test::identical(noisy, synthetic::simulateDepthCamera(frame, camera, 8)));
 }
 
 TEST(DepthCamera, FlyingPixelsOnlyAtDepthEdgesAndLossesWhereExpected) {

@@ -10,6 +10,7 @@
 
 #include "eval/synthetic.h"
 #include "normal_fusion/errors.h"
+#include "test_util.h"
 
 namespace normal_fusion {
 namespace {
@@ -144,15 +145,6 @@ double meanAngleDeg(const NormalMap& a, const NormalMap& b) {
   return count > 0 ? sum / count : 0.0;
 }
 
-bool identical(const PlanarImage& a, const PlanarImage& b) {
-  if (!a.sameSize(b) || a.channels() != b.channels()) return false;
-  for (std::size_t i = 0; i < a.pixelCount() * a.channels(); ++i) {
-    const float u = a.data()[i], v = b.data()[i];
-    if (!(u == v || (std::isnan(u) && std::isnan(v)))) return false;
-  }
-  return true;
-}
-
 /// Binomial 4-sigma half-width of a share p measured on n trials.
 double binomialTolerance(double p, std::size_t n) {
   return 4.0 * std::sqrt(p * (1.0 - p) / static_cast<double>(n)) + 1e-12;
@@ -272,11 +264,11 @@ TEST(Synthetic, ImageHasTextureEdgesAndWeakGeometricEdges) {
 TEST(Synthetic, RenderingIsDeterministicAndUsesTheDefaultPose) {
   const Frame a = synthetic::renderScene(2, 96, 72);
   const Frame b = synthetic::renderScene(2, 96, 72, synthetic::defaultPose(2));
-  EXPECT_TRUE(identical(a.image, b.image));
-  EXPECT_TRUE(identical(a.normals_gt, b.normals_gt));
-  EXPECT_TRUE(identical(a.depth, b.depth));
+  EXPECT_TRUE(test::identical(a.image, b.image));
+  EXPECT_TRUE(test::identical(a.normals_gt, b.normals_gt));
+  EXPECT_TRUE(test::identical(a.depth, b.depth));
   const Frame other = synthetic::renderScene(1, 96, 72);
-  EXPECT_FALSE(identical(a.image, other.image));
+  EXPECT_FALSE(test::identical(a.image, other.image));
 }
 
 TEST(Synthetic, RejectsBadArguments) {
@@ -323,8 +315,9 @@ TEST(Synthetic, PaperNoiseGrowsWithSigmaAndIsReproducible) {
     previous = mean;
     EXPECT_FALSE(valid(noisy, 10, 10));
     EXPECT_FALSE(valid(noisy, 20, 20));
-    EXPECT_TRUE(identical(noisy, synthetic::addPaperNoise(gt, sigma, 7)));
-    EXPECT_FALSE(identical(noisy, synthetic::addPaperNoise(gt, sigma, 8)));
+    EXPECT_TRUE(test::identical(noisy, synthetic::addPaperNoise(gt, sigma, 7)));
+    EXPECT_FALSE(
+        test::identical(noisy, synthetic::addPaperNoise(gt, sigma, 8)));
     int not_unit = 0;
     for (std::size_t i = 0; i < noisy.pixelCount(); ++i) {
       const Vec3 n{noisy.plane(0)[i], noisy.plane(1)[i], noisy.plane(2)[i]};
@@ -338,7 +331,7 @@ TEST(Synthetic, PaperNoiseGrowsWithSigmaAndIsReproducible) {
   // Rayleigh distributed with mean sigma sqrt(pi / 2) = 7.18 degrees at 0.1.
   const double mean_01 = meanAngleDeg(synthetic::addPaperNoise(gt, 0.1, 3), gt);
   EXPECT_NEAR(mean_01, 0.1 * std::sqrt(kPi / 2.0) * kRadToDeg, 0.4);
-  EXPECT_TRUE(identical(synthetic::addPaperNoise(gt, 0.0, 3), gt));
+  EXPECT_TRUE(test::identical(synthetic::addPaperNoise(gt, 0.0, 3), gt));
 }
 
 TEST(Synthetic, NormalsFromExactDepthMatchGroundTruth) {
@@ -347,7 +340,7 @@ TEST(Synthetic, NormalsFromExactDepthMatchGroundTruth) {
     // Zero noise, no quantization, no dropout: the depth is unchanged.
     const ScalarMap depth =
         synthetic::addDepthNoise(frame.depth, 0.0, 0.0, 0.0, 5);
-    EXPECT_TRUE(identical(depth, frame.depth));
+    EXPECT_TRUE(test::identical(depth, frame.depth));
     const NormalMap derived = synthetic::normalsFromDepth(depth, frame.K);
     int planar = 0, smooth = 0, planar_bad = 0, smooth_bad = 0;
     for (int y = 1; y < 119; ++y) {
@@ -436,7 +429,8 @@ TEST(Synthetic, NoisyDepthNormalsAreMissingExactlyWhereDepthIs) {
   // The composed function is the documented composition.
   const NormalMap normals =
       synthetic::normalsFromNoisyDepth(frame, 0.002, dropout, 11);
-  EXPECT_TRUE(identical(normals, synthetic::normalsFromDepth(depth, frame.K)));
+  EXPECT_TRUE(
+      test::identical(normals, synthetic::normalsFromDepth(depth, frame.K)));
   int wrong_mask = 0, back_facing = 0;
   for (int y = 0; y < 120; ++y) {
     for (int x = 0; x < 160; ++x) {
@@ -466,9 +460,9 @@ TEST(Synthetic, NoisyDepthNormalErrorGrowsWithDepthNoise) {
     const double mean = meanAngleDeg(noisy, frame.normals_gt);
     EXPECT_GT(mean, previous) << "sigma " << sigma;
     previous = mean;
-    EXPECT_TRUE(identical(
+    EXPECT_TRUE(test::identical(
         noisy, synthetic::normalsFromNoisyDepth(frame, sigma, 0.0, 4)));
-    EXPECT_FALSE(identical(
+    EXPECT_FALSE(test::identical(
         noisy, synthetic::normalsFromNoisyDepth(frame, sigma, 0.0, 5)));
   }
 }
@@ -500,7 +494,7 @@ TEST(Synthetic, SparseAccurateKeepsTheRequestedShareSpreadOverTheImage) {
                   binomialTolerance(density, n / 4));
     }
     EXPECT_EQ(changed, 0);  // sigma = 0 keeps the ground truth exactly
-    EXPECT_TRUE(identical(
+    EXPECT_TRUE(test::identical(
         sparse, synthetic::sparseAccurate(frame.normals_gt, density, 0.0, 21)));
   }
   // With noise, the kept normals move; the mask does not depend on sigma.
