@@ -2,6 +2,8 @@
 #pragma once
 
 #include <geometry_msgs/TransformStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
@@ -20,6 +22,20 @@
 
 namespace normal_fusion {
 namespace test {
+
+/// The main() of a rostest's gtest binary: gtest's and ROS's arguments, a
+/// node named `node_name` whose callbacks run on two threads while the tests
+/// run.
+inline int runRosTests(int argc, char** argv, const char* node_name) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, node_name);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  spinner.stop();
+  ros::shutdown();
+  return result;
+}
 
 inline std_msgs::Header makeHeader(double stamp_s,
                                    const std::string& frame = "camera") {

@@ -457,12 +457,6 @@ TEST(Rgbd, DepthNormalsAreFusedGuidedByTheImage) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_depth_to_normals_node");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  spinner.stop();
-  ros::shutdown();
-  return result;
+  return normal_fusion::test::runRosTests(argc, argv,
+                                          "test_depth_to_normals_node");
 }

@@ -329,12 +329,5 @@ TEST(DepthRegister, WaitsForTfThenGivesNormalsInTheColourCamera) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_depth_register");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  spinner.stop();
-  ros::shutdown();
-  return result;
+  return normal_fusion::test::runRosTests(argc, argv, "test_depth_register");
 }

@@ -302,12 +302,6 @@ TEST(Node, PublishesDiagnostics) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_normal_fusion_node");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  spinner.stop();
-  ros::shutdown();
-  return result;
+  return normal_fusion::test::runRosTests(argc, argv,
+                                          "test_normal_fusion_node");
 }
