@@ -8,6 +8,21 @@
 
 namespace evaluate {
 
+std::vector<int> castleFrames(const Options& options) {
+  const std::vector<int> numbers = nf::castle::frameNumbers(options.castle_dir);
+  const int count = std::min<int>(options.castle_frames, numbers.size());
+  std::vector<int> frames;
+  for (int k = 0; k < count; ++k) {
+    const std::size_t at =
+        count == 1
+            ? 0
+            : static_cast<std::size_t>(std::lround(
+                  static_cast<double>(k) * (numbers.size() - 1) / (count - 1)));
+    frames.push_back(numbers[at]);
+  }
+  return frames;
+}
+
 CastleOutcome runCastleCase(const Options& options, Timers* timers) {
   CastleOutcome outcome;
   if (!nf::castle::available(options.castle_dir)) {
@@ -17,17 +32,8 @@ CastleOutcome runCastleCase(const Options& options, Timers* timers) {
                    "installs it)";
     return outcome;
   }
-  const std::vector<int> numbers = nf::castle::frameNumbers(options.castle_dir);
-  // Evenly spaced frames over the sequence.
-  const int count = std::min<int>(options.castle_frames, numbers.size());
-  for (int k = 0; k < count; ++k) {
-    const std::size_t at =
-        count == 1
-            ? 0
-            : static_cast<std::size_t>(std::lround(
-                  static_cast<double>(k) * (numbers.size() - 1) / (count - 1)));
-    outcome.frames.push_back(numbers[at]);
-  }
+  outcome.frames = castleFrames(options);
+  const int count = static_cast<int>(outcome.frames.size());
   const std::vector<nf::castle::Face> model =
       nf::castle::loadModel(options.castle_dir);
   nf::castle::LoadSettings load;

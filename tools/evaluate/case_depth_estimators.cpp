@@ -167,22 +167,6 @@ EstimatorTable EstimatorScores::finish(const std::string& title) const {
   return table;
 }
 
-/// The castle frames of the castle case (evenly spaced over the sequence).
-std::vector<int> castleFrames(const Options& options) {
-  const std::vector<int> numbers = nf::castle::frameNumbers(options.castle_dir);
-  const int count = std::min<int>(options.castle_frames, numbers.size());
-  std::vector<int> frames;
-  for (int k = 0; k < count; ++k) {
-    const std::size_t at =
-        count == 1
-            ? 0
-            : static_cast<std::size_t>(std::lround(
-                  static_cast<double>(k) * (numbers.size() - 1) / (count - 1)));
-    frames.push_back(numbers[at]);
-  }
-  return frames;
-}
-
 EstimatorTable castleTable(const Options& options, Timer* solver_timer) {
   const std::vector<nf::castle::Face> model =
       nf::castle::loadModel(options.castle_dir);

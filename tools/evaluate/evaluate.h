@@ -395,6 +395,9 @@ struct CastleOutcome {
 };
 
 CastleOutcome runCastleCase(const Options& options, Timers* timers);
+/// The Castle frames the castle cases use: options.castle_frames of them,
+/// evenly spaced over the sequence.
+std::vector<int> castleFrames(const Options& options);
 
 // --- case_stream.cpp
 
