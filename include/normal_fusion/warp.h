@@ -46,6 +46,10 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
 
 namespace internal {
 
+/// Swaps a warp's output buffers (`warped`: normals, and the duals when
+/// `has_duals`) into `state`; a state without usable duals keeps none.
+void swapInWarped(SolverState& state, SolverState& warped, bool has_duals);
+
 /// Per-pixel reference of warpStateByRotation (one thread, a new state each
 /// call): the test oracle of the fast version.
 void warpStateByRotationReference(SolverState& state, const CameraIntrinsics& K,

@@ -292,17 +292,7 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       }
     }
   }
-  std::swap(state.normals, scratch.normals);
-  if (has_duals) {
-    std::swap(state.dual_h, scratch.dual_h);
-    std::swap(state.dual_v, scratch.dual_v);
-    std::swap(state.dual_data, scratch.dual_data);
-  } else {
-    // No usable duals: none (as a state without them).
-    state.dual_h = PlanarImage();
-    state.dual_v = PlanarImage();
-    state.dual_data.clear();
-  }
+  internal::swapInWarped(state, scratch, has_duals);
 }
 
 namespace internal {
@@ -366,5 +356,19 @@ void warpStateByRotationReference(SolverState& state, const CameraIntrinsics& K,
   state = std::move(warped);
 }
 
+void swapInWarped(SolverState& state, SolverState& warped, bool has_duals) {
+  std::swap(state.normals, warped.normals);
+  if (has_duals) {
+    std::swap(state.dual_h, warped.dual_h);
+    std::swap(state.dual_v, warped.dual_v);
+    std::swap(state.dual_data, warped.dual_data);
+  } else {
+    state.dual_h = PlanarImage();
+    state.dual_v = PlanarImage();
+    state.dual_data.clear();
+  }
+}
+
 }  // namespace internal
+
 }  // namespace normal_fusion

@@ -255,20 +255,6 @@ void writeRow(const SolverState& state, SolverState& warped,
   }
 }
 
-/// Swaps the warped buffers in; a state without usable duals keeps none.
-void swapIn(SolverState& state, SolverState& warped, bool has_duals) {
-  std::swap(state.normals, warped.normals);
-  if (has_duals) {
-    std::swap(state.dual_h, warped.dual_h);
-    std::swap(state.dual_v, warped.dual_v);
-    std::swap(state.dual_data, warped.dual_data);
-  } else {
-    state.dual_h = PlanarImage();
-    state.dual_v = PlanarImage();
-    state.dual_data.clear();
-  }
-}
-
 void rotationAsFloat(const Mat3& R, float out[9]) {
   for (int k = 0; k < 9; ++k) out[k] = static_cast<float>(R[k]);
 }
@@ -395,7 +381,7 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
                has_duals);
     }
   }
-  swapIn(state, scratch.state, has_duals);
+  internal::swapInWarped(state, scratch.state, has_duals);
 }
 
 namespace internal {
@@ -463,7 +449,7 @@ void warpStateByMotionReference(SolverState& state,
                  static_cast<std::size_t>(y) * W + x, source, Rf, false);
     }
   }
-  swapIn(state, warped, has_duals);
+  internal::swapInWarped(state, warped, has_duals);
 }
 
 }  // namespace internal
