@@ -200,6 +200,12 @@ struct SolverSettings {
   /// from their solution: filled in, or cold). 0.25 because it reaches the
   /// converged energy sooner than 1 (docs/performance.md, time to solution).
   double step_balance = settings_default::step_balance;
+  /// Relaxed Chambolle-Pock (Condat 2013; Chambolle & Pock 2016) on the
+  /// whole-image levels: each inner iteration moves the normals and the
+  /// duals rho times its plain step, x <- x + rho (x_hat - x); rho in
+  /// [1, 1.95] (convergent for rho < 2 under the same step condition). 1 =
+  /// the plain iteration; the warm start's local refinement keeps 1.
+  double over_relaxation = settings_default::over_relaxation;
 
   /// Throws ParameterError naming the first setting that is out of the
   /// table's range (settings_table.def) or a bad step pair.

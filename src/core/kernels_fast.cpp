@@ -42,9 +42,10 @@ inline ConstPlanes3 rowOf(const PlanarImage& img, std::size_t offset) {
 // Row kernels: NF_MULTIVERSION (AVX-512, AVX2 and baseline x86-64 clones).
 
 /// p <- clamp_w((p + sigma g) / (1 + sigma eps / w)) for one row of one
-/// direction, with g = next - here given as two row pointers.
+/// direction, with g = next - here given as two row pointers; relaxed,
+/// p <- p + rho (p_hat - p), when rho != 1.
 NF_MULTIVERSION
-void huberDualRow(int n, float sigma, float sigma_eps,
+void huberDualRow(int n, float sigma, float sigma_eps, float rho,
                   const float* __restrict w, const float* __restrict here_x,
                   const float* __restrict here_y,
                   const float* __restrict here_z,
@@ -52,11 +53,20 @@ void huberDualRow(int n, float sigma, float sigma_eps,
                   const float* __restrict next_y,
                   const float* __restrict next_z, float* __restrict px,
                   float* __restrict py, float* __restrict pz) {
+  if (rho == 1.0f) {
+    for (int x = 0; x < n; ++x) {
+      // p <- prox(p + sigma grad nbar), grad nbar = next - here.
+      huberDualStep(px[x], py[x], pz[x], next_x[x] - here_x[x],
+                    next_y[x] - here_y[x], next_z[x] - here_z[x], sigma, w[x],
+                    sigma_eps);
+    }
+    return;
+  }
   for (int x = 0; x < n; ++x) {
-    // p <- prox(p + sigma grad nbar), grad nbar = next - here.
-    huberDualStep(px[x], py[x], pz[x], next_x[x] - here_x[x],
-                  next_y[x] - here_y[x], next_z[x] - here_z[x], sigma, w[x],
-                  sigma_eps);
+    // p <- p + rho (prox(p + sigma grad nbar) - p).
+    huberDualStepRelaxed(px[x], py[x], pz[x], next_x[x] - here_x[x],
+                         next_y[x] - here_y[x], next_z[x] - here_z[x], sigma,
+                         w[x], sigma_eps, rho);
   }
 }
 
@@ -71,18 +81,20 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
   const float sigma = prm.sigma;
   const float sigma_eps = prm.sigma * prm.huber_eps;
   const float sigma_data = prm.sigma_data;
+  const float rho = prm.relaxation;
   // p_h: grad_h nbar = nbar(x+1) - nbar(x), 0 on the last column (so the
   // last column sees next = here).
-  huberDualRow(W - 1, sigma, sigma_eps, level.edge_weight.plane(0) + off, nb.x,
-               nb.y, nb.z, nb.x + 1, nb.y + 1, nb.z + 1, ph.x, ph.y, ph.z);
-  huberDualRow(1, sigma, sigma_eps, level.edge_weight.plane(0) + off + W - 1,
-               nb.x + W - 1, nb.y + W - 1, nb.z + W - 1, nb.x + W - 1,
-               nb.y + W - 1, nb.z + W - 1, ph.x + W - 1, ph.y + W - 1,
-               ph.z + W - 1);
+  huberDualRow(W - 1, sigma, sigma_eps, rho, level.edge_weight.plane(0) + off,
+               nb.x, nb.y, nb.z, nb.x + 1, nb.y + 1, nb.z + 1, ph.x, ph.y,
+               ph.z);
+  huberDualRow(1, sigma, sigma_eps, rho,
+               level.edge_weight.plane(0) + off + W - 1, nb.x + W - 1,
+               nb.y + W - 1, nb.z + W - 1, nb.x + W - 1, nb.y + W - 1,
+               nb.z + W - 1, ph.x + W - 1, ph.y + W - 1, ph.z + W - 1);
   // p_v: grad_v nbar = nbar(y+1) - nbar(y), 0 on the last row.
   const ConstPlanes3 nb_next = rowOf(static_cast<const PlanarImage&>(s.nbar),
                                      y + 1 < level.height ? off + W : off);
-  huberDualRow(W, sigma, sigma_eps, level.edge_weight.plane(1) + off, nb.x,
+  huberDualRow(W, sigma, sigma_eps, rho, level.edge_weight.plane(1) + off, nb.x,
                nb.y, nb.z, nb_next.x, nb_next.y, nb_next.z, pv.x, pv.y, pv.z);
   // q_l, one data term at a time.
   for (int l = 0; l < level.num_inputs; ++l) {
@@ -91,13 +103,13 @@ void dualRow(const PreparedLevel& level, const InnerParams& prm,
     const Planes3 q = rowOf(s.q[l], off);
     if (prm.penalty == DataPenalty::kL2 && level.data_huber) {
       dataDualRowHuber(W, sigma_data, c_w, level.data_eps[l].plane(0) + off,
-                       nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x, q.y, q.z);
+                       nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x, q.y, q.z, rho);
     } else if (prm.penalty == DataPenalty::kL2) {
       dataDualRowL2(W, sigma_data, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z, q.x,
-                    q.y, q.z);
+                    q.y, q.z, rho);
     } else {
       dataDualRowSquared(W, sigma_data, c_w, nb.x, nb.y, nb.z, f.x, f.y, f.z,
-                         q.x, q.y, q.z);
+                         q.x, q.y, q.z, rho);
     }
   }
 }
@@ -117,16 +129,18 @@ void divergenceRow(int W, const float* __restrict ph,
     d[W - 1] = -ph[W - 2] + here_v_on * pv[W - 1] - up_on * pv_up[W - 1];
 }
 
-/// n <- Proj_C(n + tau d), nbar <- 2 n - n_old for one row; C the tangent
-/// plane at n0, intersected with n . r <= 0 when kSoft.
-template <bool kSoft>
+/// n_hat = Proj_C(n + tau d), nbar <- 2 n_hat - n_old for one row; C the
+/// tangent plane at n0, intersected with n . r <= 0 when kSoft; n <- n_hat,
+/// or n_old + rho (n_hat - n_old) when kRelaxed.
+template <bool kSoft, bool kRelaxed>
 NF_MULTIVERSION void primalUpdateRow(
-    int W, float tau, const float* __restrict dx, const float* __restrict dy,
-    const float* __restrict dz, const float* __restrict ax_,
-    const float* __restrict ay_, const float* __restrict az_, float r0x,
-    float r0y, float r0z, float drx, float dry, float drz, float* __restrict nx,
-    float* __restrict ny, float* __restrict nz, float* __restrict bx,
-    float* __restrict by, float* __restrict bz) {
+    int W, float tau, float rho, const float* __restrict dx,
+    const float* __restrict dy, const float* __restrict dz,
+    const float* __restrict ax_, const float* __restrict ay_,
+    const float* __restrict az_, float r0x, float r0y, float r0z, float drx,
+    float dry, float drz, float* __restrict nx, float* __restrict ny,
+    float* __restrict nz, float* __restrict bx, float* __restrict by,
+    float* __restrict bz) {
   for (int x = 0; x < W; ++x) {
     const float ox = nx[x], oy = ny[x], oz = nz[x];
     float vx = ox + tau * dx[x];
@@ -136,17 +150,18 @@ NF_MULTIVERSION void primalUpdateRow(
     const float xf = static_cast<float>(x);
     projectFeasible<kSoft>(vx, vy, vz, ax_[x], ay_[x], az_[x], r0x + drx * xf,
                            r0y + dry * xf, r0z + drz * xf);
-    nx[x] = vx;
-    ny[x] = vy;
-    nz[x] = vz;
+    nx[x] = kRelaxed ? relaxed(ox, vx, rho) : vx;
+    ny[x] = kRelaxed ? relaxed(oy, vy, rho) : vy;
+    nz[x] = kRelaxed ? relaxed(oz, vz, rho) : vz;
     bx[x] = 2.0f * vx - ox;
     by[x] = 2.0f * vy - oy;
     bz[x] = 2.0f * vz - oz;
   }
 }
 
-/// Primal pass over one row: n <- Proj_C(n + tau (div p - sum q)),
-/// nbar <- 2 n - n_old. `scratch` holds 3 rows of W floats.
+/// Primal pass over one row: n_hat = Proj_C(n + tau (div p - sum q)),
+/// nbar <- 2 n_hat - n_old, n <- n_old + rho (n_hat - n_old). `scratch` holds 3
+/// rows of W floats.
 void primalRow(const PreparedLevel& level, const InnerParams& prm,
                IterationState& s, int y, float* scratch) {
   const int W = level.width;
@@ -171,10 +186,14 @@ void primalRow(const PreparedLevel& level, const InnerParams& prm,
   const ConstPlanes3 n0 = rowOf(static_cast<const PlanarImage&>(s.n0), off);
   const Planes3 n = rowOf(s.n, off);
   const Planes3 nb = rowOf(s.nbar, off);
+  const bool relax = prm.relaxation != 1.0f;
   auto update =
-      prm.soft_visibility ? primalUpdateRow<true> : primalUpdateRow<false>;
-  update(W, prm.tau, d[0], d[1], d[2], n0.x, n0.y, n0.z, r0x, r0y, r0z,
-         static_cast<float>(Ki[0]), static_cast<float>(Ki[3]),
+      prm.soft_visibility
+          ? (relax ? primalUpdateRow<true, true> : primalUpdateRow<true, false>)
+          : (relax ? primalUpdateRow<false, true>
+                   : primalUpdateRow<false, false>);
+  update(W, prm.tau, prm.relaxation, d[0], d[1], d[2], n0.x, n0.y, n0.z, r0x,
+         r0y, r0z, static_cast<float>(Ki[0]), static_cast<float>(Ki[3]),
          static_cast<float>(Ki[6]), n.x, n.y, n.z, nb.x, nb.y, nb.z);
 }
 

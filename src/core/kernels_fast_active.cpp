@@ -144,15 +144,16 @@ void dataDualsOfShare(const PreparedLevel& level, const InnerParams& prm,
     const float* c_w = b.c.data() + l * P + k0;
     const float* n[3] = {nb[0].data() + k0, nb[1].data() + k0,
                          nb[2].data() + k0};
+    // The local refinement runs the plain step (relaxation 1).
     if (prm.penalty == DataPenalty::kL2 && level.data_huber) {
       dataDualRowHuber(np, sigma_data, c_w, b.delta.data() + l * P + k0, n[0],
-                       n[1], n[2], f[0], f[1], f[2], q[0], q[1], q[2]);
+                       n[1], n[2], f[0], f[1], f[2], q[0], q[1], q[2], 1.0f);
     } else if (prm.penalty == DataPenalty::kL2) {
       dataDualRowL2(np, sigma_data, c_w, n[0], n[1], n[2], f[0], f[1], f[2],
-                    q[0], q[1], q[2]);
+                    q[0], q[1], q[2], 1.0f);
     } else {
       dataDualRowSquared(np, sigma_data, c_w, n[0], n[1], n[2], f[0], f[1],
-                         f[2], q[0], q[1], q[2]);
+                         f[2], q[0], q[1], q[2], 1.0f);
     }
   }
 }

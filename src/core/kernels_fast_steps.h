@@ -45,6 +45,22 @@ inline void huberDualStep(float& px, float& py, float& pz, float gx, float gy,
   pz = az * sc;
 }
 
+/// The relaxed step (Condat 2013): x_old + rho (x_hat - x_old).
+inline float relaxed(float x_old, float x_hat, float rho) {
+  return x_old + rho * (x_hat - x_old);
+}
+
+/// huberDualStep() relaxed: p <- p + rho (p_hat - p), p_hat its plain step.
+inline void huberDualStepRelaxed(float& px, float& py, float& pz, float gx,
+                                 float gy, float gz, float sigma, float w,
+                                 float sigma_eps, float rho) {
+  float hx = px, hy = py, hz = pz;
+  huberDualStep(hx, hy, hz, gx, gy, gz, sigma, w, sigma_eps);
+  px = relaxed(px, hx, rho);
+  py = relaxed(py, hy, rho);
+  pz = relaxed(pz, hz, rho);
+}
+
 /// v <- Proj_C(v): onto the tangent plane n0 . n = 1 (n0 = a), then, when
 /// kSoft, within the plane onto n . r <= 0 (the line n . r = 0 when
 /// violated). Branch-free, for vectorised loops.
@@ -69,7 +85,9 @@ inline void projectFeasible(float& vx, float& vy, float& vz, float ax, float ay,
 }
 
 // Row kernels of the data terms' dual steps and of d -= q
-// (kernels_fast_shared.cpp; NF_MULTIVERSION clones).
+// (kernels_fast_shared.cpp; NF_MULTIVERSION clones). The dual steps take the
+// relaxation rho: q <- q + rho (q_hat - q), q_hat the step below (rho = 1:
+// q_hat itself, bit for bit).
 
 /// q <- clamp_c(q + sigma (nbar - f)) (unsquared) for one row.
 void dataDualRowL2(int n, float sigma, const float* __restrict c,
@@ -77,7 +95,7 @@ void dataDualRowL2(int n, float sigma, const float* __restrict c,
                    const float* __restrict nz, const float* __restrict fx,
                    const float* __restrict fy, const float* __restrict fz,
                    float* __restrict qx, float* __restrict qy,
-                   float* __restrict qz);
+                   float* __restrict qz, float rho);
 /// q <- clamp_c((q + sigma (nbar - f)) / (1 + sigma delta / c)) (unsquared,
 /// Huber threshold delta) for one row.
 void dataDualRowHuber(int n, float sigma, const float* __restrict c,
@@ -85,14 +103,14 @@ void dataDualRowHuber(int n, float sigma, const float* __restrict c,
                       const float* __restrict ny, const float* __restrict nz,
                       const float* __restrict fx, const float* __restrict fy,
                       const float* __restrict fz, float* __restrict qx,
-                      float* __restrict qy, float* __restrict qz);
+                      float* __restrict qy, float* __restrict qz, float rho);
 /// q <- (q + sigma (nbar - f)) / (1 + sigma / c) (squared) for one row.
 void dataDualRowSquared(int n, float sigma, const float* __restrict c,
                         const float* __restrict nx, const float* __restrict ny,
                         const float* __restrict nz, const float* __restrict fx,
                         const float* __restrict fy, const float* __restrict fz,
                         float* __restrict qx, float* __restrict qy,
-                        float* __restrict qz);
+                        float* __restrict qz, float rho);
 /// d -= q for one row and one channel.
 void subtractRow(int W, const float* __restrict q, float* __restrict d);
 

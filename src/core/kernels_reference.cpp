@@ -75,6 +75,13 @@ void divergence(const PlanarImage& p_h, const PlanarImage& p_v,
   }
 }
 
+/// The relaxed step (Condat 2013): x <- x_old + rho (x_hat - x_old) on the
+/// three channels of v = x_hat; rho = 1 leaves x_hat as it is, bit for bit.
+void relax(const float old[3], float rho, float v[3]) {
+  if (rho == 1.0f) return;
+  for (int c = 0; c < 3; ++c) v[c] = old[c] + rho * (v[c] - old[c]);
+}
+
 /// clamp_c(v) = v / max(1, |v| / c); c = 0 gives 0.
 void clampVector(float v[3], float radius) {
   if (!(radius > 0.0f)) {
@@ -116,40 +123,47 @@ void dataDualProx(float v[3], float c_weight, float delta, float sigma,
 }
 
 /// Dual step of the weighted Huber term (prox of sigma (w huber_eps)^*):
-/// p <- clamp_w((p + sigma grad nbar) / (1 + sigma eps / w)).
+/// p_hat = clamp_w((p + sigma grad nbar) / (1 + sigma eps / w)), then
+/// p <- p + rho (p_hat - p).
 void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
-                   float sigma, float eps) {
+                   float sigma, float eps, float rho) {
   const std::size_t N = p.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
-    float v[3];
+    float v[3], old[3];
     for (int c = 0; c < 3; ++c) {
-      v[c] = p.plane(c)[i] + sigma * grad.plane(c)[i];
+      old[c] = p.plane(c)[i];
+      v[c] = old[c] + sigma * grad.plane(c)[i];
     }
     huberDualProx(v, weight[i], sigma, eps);
+    relax(old, rho, v);
     for (int c = 0; c < 3; ++c) p.plane(c)[i] = v[c];
   }
 }
 
 /// Dual step of one data term (prox of sigma F_l^*, F_l(z) = c phi(z - f)):
-/// q <- dataDualProx(q + sigma (nbar - f)).
+/// q_hat = dataDualProx(q + sigma (nbar - f)), then q <- q + rho (q_hat - q).
 void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
                   const float* c_weight, const float* delta, float sigma,
-                  DataPenalty penalty) {
+                  DataPenalty penalty, float rho) {
   const std::size_t N = q.pixelCount();
   for (std::size_t i = 0; i < N; ++i) {
-    float v[3];
+    float v[3], old[3];
     for (int c = 0; c < 3; ++c) {
-      v[c] = q.plane(c)[i] + sigma * (nbar.plane(c)[i] - f.plane(c)[i]);
+      old[c] = q.plane(c)[i];
+      v[c] = old[c] + sigma * (nbar.plane(c)[i] - f.plane(c)[i]);
     }
     dataDualProx(v, c_weight[i], delta != nullptr ? delta[i] : 0.0f, sigma,
                  penalty);
+    relax(old, rho, v);
     for (int c = 0; c < 3; ++c) q.plane(c)[i] = v[c];
   }
 }
 
-/// Primal step: n <- Proj_C(n + tau (div p - sum_l q_l)), C the tangent plane
-/// at n0 (intersected with n . r <= 0 in soft visibility mode); then
-/// nbar <- 2 n - n_old.
+/// Primal step: n_hat = Proj_C(n + tau (div p - sum_l q_l)), C the tangent
+/// plane at n0 (intersected with n . r <= 0 in soft visibility mode); then
+/// nbar <- 2 n_hat - n_old and n <- n_old + rho (n_hat - n_old) (n = n_hat
+/// for rho = 1). The extrapolation uses n_hat: the relaxed iteration is
+/// the plain one applied to the relaxed pair (n, p, q).
 void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& div, const PlanarImage& q_sum,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar) {
@@ -164,10 +178,9 @@ void primalStep(const PreparedLevel& level, const InnerParams& params,
       }
       level.ray(x, y, r);
       projectTangentFeasible(n0_px, r, params.soft_visibility, v);
-      for (int c = 0; c < 3; ++c) {
-        n.at(c, y, x) = v[c];
-        nbar.at(c, y, x) = 2.0f * v[c] - n_old[c];
-      }
+      for (int c = 0; c < 3; ++c) nbar.at(c, y, x) = 2.0f * v[c] - n_old[c];
+      relax(n_old, params.relaxation, v);
+      for (int c = 0; c < 3; ++c) n.at(c, y, x) = v[c];
     }
   }
 }
@@ -186,19 +199,19 @@ bool runInnerReference(const PreparedLevel& level, const InnerParams& params,
     // A stop request ends the run between iterations.
     if (stopRequested(params.cancel)) return false;
     // Dual ascent on the smoothness terms: p_d <- prox(p_d + sigma grad_d
-    // nbar).
+    // nbar), relaxed by rho.
     reference::gradient(s.nbar, s.grad_h, s.grad_v);
     reference::proxHuberDual(s.p_h, s.grad_h, level.edge_weight.plane(0),
-                             params.sigma, params.huber_eps);
+                             params.sigma, params.huber_eps, params.relaxation);
     reference::proxHuberDual(s.p_v, s.grad_v, level.edge_weight.plane(1),
-                             params.sigma, params.huber_eps);
+                             params.sigma, params.huber_eps, params.relaxation);
     // Dual ascent on each data term: q_l <- prox(q_l + sigma (nbar - f_l)).
     s.q_sum.fill(0.0f);
     for (int l = 0; l < level.num_inputs; ++l) {
       reference::proxDataDual(
           s.q[l], s.nbar, level.data[l], level.data_weight[l].plane(0),
           level.data_huber ? level.data_eps[l].plane(0) : nullptr,
-          params.sigma_data, params.penalty);
+          params.sigma_data, params.penalty, params.relaxation);
       for (int c = 0; c < 3; ++c) {
         for (std::size_t i = 0; i < N; ++i) {
           s.q_sum.plane(c)[i] += s.q[l].plane(c)[i];

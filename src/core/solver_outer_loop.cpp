@@ -22,13 +22,32 @@ double secondsSince(SolverImpl::Clock::time_point t) {
   return std::chrono::duration<double>(SolverImpl::Clock::now() - t).count();
 }
 
+/// The last plain primal step n_hat of a relaxed run, into `out`: the
+/// primal step left nbar = 2 n_hat - n_old and n = n_old + rho (n_hat -
+/// n_old), so n_hat = (n + (1 - rho) nbar) / (2 - rho). It lies in the
+/// feasible set C (the relaxed n may not: rho > 1 extrapolates).
+void lastPrimalStep(const internal::IterationState& s, float rho,
+                    PlanarImage& out, int threads) {
+  out.resizeKeepingCapacity(s.n.width(), s.n.height(), 3);
+  const long values = static_cast<long>(3 * s.n.pixelCount());
+  const float* n = s.n.data();
+  const float* nbar = s.nbar.data();
+  float* o = out.data();
+  const float a = 1.0f - rho, b = 1.0f / (2.0f - rho);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (long i = 0; i < values; ++i) o[i] = (n[i] + a * nbar[i]) * b;
+}
+
 }  // namespace
 
 void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
                           SolveReport& report) {
   internal::IterationState& s = state_;
-  const InnerParams params =
+  InnerParams params =
       innerParams(level, finest ? settings_.step_balance : kCoarseStepBalance);
+  // Relaxed iterations on whole-image levels only: the local refinement's
+  // short steps keep the plain one.
+  params.relaxation = static_cast<float>(settings_.over_relaxation);
   const internal::EnergyTerms terms = energyTerms();
   const Clock::time_point level_start = Clock::now();
   // Dynamic guidance: the level's weights (levels_ owns it) follow n0, and E
@@ -78,7 +97,13 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
     if (finest) report.outer_iterations += 1;
     // Re-linearize: the normalized iterate replaces n0 when E does not rise.
     const Clock::time_point finish_start = Clock::now();
-    internal::normalizeInto(s.n, candidate_, threads_);
+    // A relaxed run's candidate comes from its last plain step (feasible).
+    if (params.relaxation != 1.0f) {
+      lastPrimalStep(s, params.relaxation, candidate_, threads_);
+      internal::normalizeInto(candidate_, candidate_, threads_);
+    } else {
+      internal::normalizeInto(s.n, candidate_, threads_);
+    }
     const double e = backend_->energy(level, terms, candidate_, threads_);
     finish_seconds = secondsSince(finish_start);
     if (finest) {

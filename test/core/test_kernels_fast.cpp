@@ -1,8 +1,9 @@
 // The fast backend against the reference: the same iterates after many
-// iterations (plain TV, data thresholds, any threads and block depth) and the
-// same energy.
+// iterations (plain TV, data thresholds, any threads and block depth, the
+// relaxed iteration) and the same energy.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <tuple>
 
@@ -153,6 +154,76 @@ TEST(FastEnergy, MatchesTheReferenceEnergy) {
       }
     }
   }
+}
+
+/// The relaxed iteration (relaxation 1.8): the same iterates from both
+/// backends for each data penalty, with and without data thresholds and soft
+/// visibility, on any thread count and block depth; and not those of the
+/// plain iteration.
+TEST(FastMatchesReferenceRelaxed, SameIteratesAfterManyIterations) {
+  for (DataPenalty penalty : {DataPenalty::kL2, DataPenalty::kSquaredL2}) {
+    for (bool data_huber : {false, true}) {
+      for (bool soft : {false, true}) {
+        const auto level = randomLevel(31, 19, 2, 11, data_huber);
+        internal::InnerParams params = preconditionedParams(2, 1);
+        params.penalty = penalty;
+        params.soft_visibility = soft;
+        params.relaxation = 1.8f;
+        internal::IterationState ref;
+        initState(level, ref);
+        internal::runInnerReference(level, params, ref, 60);
+        for (int threads : {1, 2, 3}) {
+          for (int depth : {1, 6}) {
+            params.num_threads = threads;
+            params.block_depth = depth;
+            internal::IterationState fast;
+            initState(level, fast);
+            internal::runInnerFast(level, params, fast, 60);
+            EXPECT_LT(maxAbsDiff({{&ref.n, &fast.n},
+                                  {&ref.nbar, &fast.nbar},
+                                  {&ref.p_h, &fast.p_h},
+                                  {&ref.p_v, &fast.p_v},
+                                  {&ref.q[0], &fast.q[0]},
+                                  {&ref.q[1], &fast.q[1]}}),
+                      1e-4)
+                << "penalty " << toString(penalty) << " data_huber "
+                << data_huber << " soft " << soft << " threads " << threads
+                << " depth " << depth;
+          }
+        }
+        internal::IterationState plain;
+        initState(level, plain);
+        params.relaxation = 1.0f;
+        internal::runInnerReference(level, params, plain, 60);
+        EXPECT_GT(maxAbsDiff({{&plain.n, &ref.n}}), 1e-3)
+            << "penalty " << toString(penalty) << " data_huber " << data_huber
+            << " soft " << soft;
+      }
+    }
+  }
+}
+
+/// Relaxation 1.8 reaches the inner problem's minimum (the energy at the
+/// tangent-plane iterate) that the plain iteration converges to, and gets
+/// closer to it in the same number of iterations.
+TEST(RelaxedIteration, SameMinimumReachedSooner) {
+  const auto level = randomLevel(40, 30, 2, 5, /*data_huber=*/true);
+  internal::InnerParams params = preconditionedParams(2, 2);
+  params.huber_eps = 0.0f;
+  auto energyAfter = [&](float rho, int iterations) {
+    params.relaxation = rho;
+    internal::IterationState s;
+    initState(level, s);
+    internal::runInnerFast(level, params, s, iterations);
+    return internal::energyFast(level, 0.0, DataPenalty::kL2, s.n, 2);
+  };
+  const double e_star =
+      std::min(energyAfter(1.0f, 6000), energyAfter(1.8f, 6000));
+  EXPECT_NEAR(energyAfter(1.8f, 6000), e_star, 1e-5 * e_star);
+  EXPECT_NEAR(energyAfter(1.0f, 6000), e_star, 1e-5 * e_star);
+  const double gap_plain = energyAfter(1.0f, 100) - e_star;
+  const double gap_relaxed = energyAfter(1.8f, 100) - e_star;
+  EXPECT_LT(gap_relaxed, gap_plain);
 }
 
 INSTANTIATE_TEST_SUITE_P(

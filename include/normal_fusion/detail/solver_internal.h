@@ -80,6 +80,9 @@ struct InnerParams {
   float tau = 0.0f;         ///< primal step
   float sigma = 0.0f;       ///< dual step of the smoothness terms (p_h, p_v)
   float sigma_data = 0.0f;  ///< dual step of the data terms (q_l)
+  /// Relaxation rho of the relaxed iteration (Condat 2013): x <- x +
+  /// rho (x_hat - x) for the normals and the duals; 1 = the plain step.
+  float relaxation = 1.0f;
   float huber_eps = 0.0f;
   DataPenalty penalty = DataPenalty::kL2;
   bool soft_visibility = false;
@@ -432,12 +435,13 @@ void clampVector(float v[3], float radius);
 void huberDualProx(float v[3], float w, float sigma, float eps);
 void dataDualProx(float v[3], float c_weight, float delta, float sigma,
                   DataPenalty penalty);
+/// The dual steps over an image, relaxed by rho (1 = the plain prox).
 void proxHuberDual(PlanarImage& p, const PlanarImage& grad, const float* weight,
-                   float sigma, float eps);
+                   float sigma, float eps, float rho = 1.0f);
 /// `delta` may be null (0 everywhere).
 void proxDataDual(PlanarImage& q, const PlanarImage& nbar, const PlanarImage& f,
                   const float* c_weight, const float* delta, float sigma,
-                  DataPenalty penalty);
+                  DataPenalty penalty, float rho = 1.0f);
 void primalStep(const PreparedLevel& level, const InnerParams& params,
                 const PlanarImage& div, const PlanarImage& q_sum,
                 const PlanarImage& n0, PlanarImage& n, PlanarImage& nbar);
