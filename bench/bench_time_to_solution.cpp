@@ -89,6 +89,14 @@ std::vector<Schedule> schedules() {
        0.25, 1.8},
       {"preconditioned, 50 inner, balance 0.25, relaxation 1.9", 50, true, 1,
        0.25, 1.9},
+      {"preconditioned, 20 inner, balance 0.25, relaxation 1.9", 20, true, 1,
+       0.25, 1.9},
+      {"preconditioned, 10 inner, balance 0.25, relaxation 1.9", 10, true, 1,
+       0.25, 1.9},
+      {"preconditioned, 50 inner, balance 0.125, relaxation 1.9", 50, true, 1,
+       0.125, 1.9},
+      {"preconditioned, 50 inner, balance 0.5, relaxation 1.9", 50, true, 1,
+       0.5, 1.9},
   };
 }
 
