@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -247,6 +248,7 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                             state.normals.plane(2)};
   float* n_cur[3] = {scratch.normals.plane(0), scratch.normals.plane(1),
                      scratch.normals.plane(2)};
+  const int rotated_groups = dual_warp == DualWarp::kReset ? 0 : dual_groups;
   // Rows in chunks of kChunk pixels: the chunk's source positions and the
   // warped normals first, then each dual group over the chunk.
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -262,19 +264,13 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                        n_prev[1], n_prev[2], Rf, cos_blend, n_cur[0] + row,
                        n_cur[1] + row, n_cur[2] + row, corner, step_x, step_y,
                        t_x, t_y);
-      // The duals at the same positions, rotated (zero where no prediction),
-      // or all zero (DualWarp::kReset).
-      for (int g = 0; g < dual_groups; ++g) {
+      // The duals at the same positions, rotated (zero where no prediction);
+      // DualWarp::kReset zeroes them below.
+      for (int g = 0; g < rotated_groups; ++g) {
         const PlanarImage& src = dual_group(state, g);
         PlanarImage& dst = dual_group(scratch, g);
         const float* from[3] = {src.data(), src.data() + N, src.data() + 2 * N};
         float* to[3] = {dst.data(), dst.data() + N, dst.data() + 2 * N};
-        if (dual_warp == DualWarp::kReset) {
-          for (int c = 0; c < 3; ++c) {
-            std::fill(to[c] + row, to[c] + row + count, 0.0f);
-          }
-          continue;
-        }
         for (int j = 0; j < count; ++j) {
           float p[3] = {0.0f, 0.0f, 0.0f};
           if (corner[j] >= 0) {
@@ -284,6 +280,20 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
           for (int c = 0; c < 3; ++c) to[c][row + j] = p[c];
         }
       }
+    }
+  }
+  if (dual_warp == DualWarp::kReset && dual_groups > 0) {
+    // All duals zero: whole planes at once (large blocks, which the C
+    // library writes faster than the chunks' short runs), in as many parts
+    // as threads.
+    const int parts = 3 * dual_groups * threads;
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int part = 0; part < parts; ++part) {
+      const int plane = part / threads, share = part % threads;
+      float* to = dual_group(scratch, plane / 3).data() + (plane % 3) * N;
+      const std::size_t begin = N * share / threads;
+      const std::size_t end = N * (share + 1) / threads;
+      std::memset(to + begin, 0, (end - begin) * sizeof(float));
     }
   }
   internal::swapInWarped(state, scratch, has_duals);
