@@ -229,6 +229,84 @@ void linkWeights(const EdgeWeightSettings& settings,
   }
 }
 
+/// True when the weights come from the forward differences of the largest
+/// channel (or the only one) of the unsmoothed image: one pass per row then
+/// gives the gradients and the weights (fusedForwardWeights()).
+bool fusable(const ColorImage& image, const EdgeWeightSettings& settings) {
+  const bool luminance =
+      image.channels() == 3 && settings.color_mode == EdgeColorMode::kLuminance;
+  return !luminance && settings.smoothing_sigma <= 0.0 &&
+         settings.gradient == EdgeGradient::kForwardDifference;
+}
+
+/// g_h = max_c |I_c(x+1) - I_c(x)|, g_v = max_c |I_c(y+1) - I_c(y)| of one
+/// row (0 on the last column; `next` is the row itself on the last row), in
+/// differenceMagnitudeMax()'s order of the channels: the same maxima (the
+/// last column's |I(x) - I(x)| never raises one).
+NF_MULTIVERSION
+void forwardDifferenceRow(int W, int channels, const float* const* row,
+                          const float* const* next, float* __restrict g_h,
+                          float* __restrict g_v) {
+  for (int x = 0; x < W; ++x) {
+    g_h[x] = 0.0f;
+    g_v[x] = 0.0f;
+  }
+  for (int c = 0; c < channels; ++c) {
+    const float* __restrict r = row[c];
+    const float* __restrict n = next[c];
+    for (int x = 0; x + 1 < W; ++x) {
+      g_h[x] = std::max(g_h[x], std::abs(r[x + 1] - r[x]));
+    }
+    for (int x = 0; x < W; ++x)
+      g_v[x] = std::max(g_v[x], std::abs(n[x] - r[x]));
+  }
+}
+
+/// computeEdgeWeightsInto() where fusable(): per row, the forward
+/// differences straight into the weight rows, then linkWeights()'s weight
+/// of each (the same values, without the gradient planes' passes).
+void fusedForwardWeights(const ColorImage& image,
+                         const EdgeWeightSettings& settings,
+                         PlanarImage& weights, int threads) {
+  const int W = image.width(), H = image.height(), C = image.channels();
+  const bool exponential =
+      settings.function == EdgeWeightFunction::kExponential;
+  const double alpha = settings.alpha, beta = settings.beta;
+  const float w_min = static_cast<float>(settings.w_min);
+  auto weight_of = [&](float g) {
+    const double gb = beta == 1.0 ? g : std::pow(static_cast<double>(g), beta);
+    const double w =
+        exponential ? std::exp(-alpha * gb) : 1.0 / (1.0 + alpha * gb);
+    return std::max(w_min, static_cast<float>(w));
+  };
+  const bool fast = exponential && beta == 1.0;
+  const float minus_alpha = static_cast<float>(-alpha);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    const std::size_t below =
+        static_cast<std::size_t>(std::min(y + 1, H - 1)) * W;
+    const float* here[3] = {};
+    const float* next[3] = {};
+    for (int c = 0; c < C; ++c) {
+      here[c] = image.plane(c) + row;
+      next[c] = image.plane(c) + below;
+    }
+    float* w_h = weights.plane(0) + row;
+    float* w_v = weights.plane(1) + row;
+    forwardDifferenceRow(W, C, here, next, w_h, w_v);
+    if (fast) {
+      exponentialWeightRow(W, minus_alpha, w_min, w_h);
+      exponentialWeightRow(W, minus_alpha, w_min, w_v);
+    } else {
+      for (int x = 0; x < W; ++x) {
+        w_h[x] = weight_of(w_h[x]);
+        w_v[x] = weight_of(w_v[x]);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 namespace internal {
@@ -250,6 +328,23 @@ void computeEdgeWeightsInto(const ColorImage& image,
     throw InputError("edge weights: expected a 1- or 3-channel image, got " +
                      std::to_string(image.channels()) + " channels");
   }
+  const int W = image.width(), H = image.height();
+  weights.resize(W, H, 2);
+  if (!settings.enabled) {
+    weights.fill(1.0f);
+    return;
+  }
+  if (fusable(image, settings)) {
+    fusedForwardWeights(image, settings, weights, threads);
+    return;
+  }
+  computeEdgeWeightsPassByPass(image, settings, weights, scratch, threads);
+}
+
+void computeEdgeWeightsPassByPass(const ColorImage& image,
+                                  const EdgeWeightSettings& settings,
+                                  PlanarImage& weights,
+                                  EdgeWeightScratch& scratch, int threads) {
   const int W = image.width(), H = image.height();
   const std::size_t N = image.pixelCount();
   weights.resize(W, H, 2);

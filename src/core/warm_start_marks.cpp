@@ -13,33 +13,55 @@ namespace internal {
 
 namespace {
 
+/// The links of a pixel to its 4-neighbours j with use[j] == 1 (left,
+/// right, up, down, in that order): each neighbour and the link's weight
+/// (w_h or w_v at the link's left or upper pixel). Found once per pixel,
+/// not once per candidate.
+struct PixelLinks {
+  int count = 0;
+  int neighbour[4];
+  float weight[4];
+};
+
+PixelLinks linksOf(const PreparedLevel& level, const unsigned char* use, int i,
+                   int x, int y) {
+  const int W = level.width, H = level.height;
+  const float* w_h = level.edge_weight.plane(0);
+  const float* w_v = level.edge_weight.plane(1);
+  PixelLinks links;
+  auto add = [&](int j, float w) {
+    if (use[j] != 1) return;
+    links.neighbour[links.count] = j;
+    links.weight[links.count++] = w;
+  };
+  if (x > 0) add(i - 1, w_h[i - 1]);
+  if (x + 1 < W) add(i + 1, w_h[i]);
+  if (y > 0) add(i - W, w_v[i - W]);
+  if (y + 1 < H) add(i + W, w_v[i]);
+  return links;
+}
+
 /// The terms of E that involve pixel i when it holds the unit normal v: its
-/// data terms and the links to its 4-neighbours j with use[j] == 1 (the
-/// others left out).
+/// data terms and the `links` to its neighbours (the others left out).
+/// Every term is >= 0, so a partial sum that reaches `bound` is returned as
+/// it is: the full sum would not be below `bound` either.
 double pixelEnergy(const PreparedLevel& level, double huber_eps,
                    DataPenalty penalty, const PlanarImage& normals,
-                   const unsigned char* use, int i, const float v[3]) {
-  const int W = level.width, H = level.height;
-  const int x = i % W, y = i / W;
+                   const PixelLinks& links, int i, const float v[3],
+                   double bound) {
   const double n[3] = {v[0], v[1], v[2]};
   double total = dataEnergyAt(level, penalty, i, n);
-  // w huber(|v - n_j|) of the link between i and j, weight w_h or w_v at the
-  // link's left or upper pixel.
-  auto link = [&](int j, float w) {
-    if (use[j] != 1) return;
+  // w huber(|v - n_j|) of each link.
+  for (int k = 0; k < links.count; ++k) {
+    if (!(total < bound)) return total;
+    const int j = links.neighbour[k];
     double g2 = 0.0;
     for (int c = 0; c < 3; ++c) {
       const double g = static_cast<double>(normals.plane(c)[j]) - v[c];
       g2 += g * g;
     }
-    total += w * huberPenalty(std::sqrt(g2), huber_eps);
-  };
-  const float* w_h = level.edge_weight.plane(0);
-  const float* w_v = level.edge_weight.plane(1);
-  if (x > 0) link(i - 1, w_h[i - 1]);
-  if (x + 1 < W) link(i + 1, w_h[i]);
-  if (y > 0) link(i - W, w_v[i - W]);
-  if (y + 1 < H) link(i + W, w_v[i]);
+    total += links.weight[k] * huberPenalty(std::sqrt(g2), huber_eps);
+  }
   return total;
 }
 
@@ -50,25 +72,25 @@ double pixelEnergy(const PreparedLevel& level, double huber_eps,
 void chooseCandidate(const PreparedLevel& level, double huber_eps,
                      DataPenalty penalty, bool soft, PlanarImage& normals,
                      const unsigned char* use, int i) {
-  const int W = level.width, H = level.height;
+  const int W = level.width;
   const int x = i % W, y = i / W;
   float r[3];
   level.ray(x, y, r);
+  const PixelLinks links = linksOf(level, use, i, x, y);
   float best_v[3] = {normals.plane(0)[i], normals.plane(1)[i],
                      normals.plane(2)[i]};
   double best = std::numeric_limits<double>::infinity();
   auto consider = [&](float v[3]) {
     if (soft) projectVisible(r, v);
-    const double e = pixelEnergy(level, huber_eps, penalty, normals, use, i, v);
+    const double e =
+        pixelEnergy(level, huber_eps, penalty, normals, links, i, v, best);
     if (e < best) {
       best = e;
       for (int c = 0; c < 3; ++c) best_v[c] = v[c];
     }
   };
-  const int neighbours[4] = {x > 0 ? i - 1 : -1, x + 1 < W ? i + 1 : -1,
-                             y > 0 ? i - W : -1, y + 1 < H ? i + W : -1};
-  for (int j : neighbours) {
-    if (j < 0 || use[j] != 1) continue;
+  for (int k = 0; k < links.count; ++k) {
+    const int j = links.neighbour[k];
     float v[3] = {normals.plane(0)[j], normals.plane(1)[j],
                   normals.plane(2)[j]};
     consider(v);

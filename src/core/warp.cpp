@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -108,10 +109,12 @@ constexpr int kChunk = 64;
 /// Where a chunk of at most kChunk pixels of one row comes from, and their
 /// warped normals: internal::PreviousPixel::at() and blendable() per pixel,
 /// then bilinearRotate()'s blend, in three passes without branches that GCC
-/// vectorises (positions; the corners' normals gathered; blend test, blend,
-/// rotation and normalization). Writes n_cur (NaN where no prediction) and,
-/// per pixel, the source's first corner (-1: none), its steps to the right
-/// and down, and the blend weights.
+/// vectorises (positions; the blend's four corners gathered; blend test,
+/// blend, rotation and normalization). The corners that carry weight in
+/// blendable() are among the four gathered ones, so they are selected from
+/// them rather than loaded again. Writes n_cur (NaN where no prediction)
+/// and, per pixel, the source's first corner (-1: none), its steps to the
+/// right and down, and the blend weights.
 // Over 80 lines: its vectorised passes share the chunk's stack arrays.
 NF_MULTIVERSION
 void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
@@ -123,9 +126,6 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
                       int* __restrict step_y, float* __restrict t_x,
                       float* __restrict t_y) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  // The corners that carry weight (blendable()) and whether the position is
-  // inside the previous image.
-  int at0[kChunk], at1[kChunk], at2[kChunk], at3[kChunk];
   double in_flag[kChunk];  // 1: inside the previous image
   // internal::PreviousPixel::at(), in double; the positions outside replaced by
   // (0, 0) (safe indices; their prediction is dropped below).
@@ -144,40 +144,22 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
     v_safe[j] = in ? v : 0.0;
     in_flag[j] = in ? 1.0 : 0.0;
   }
-  // The corners of the blend, its weights, and the corners that carry
-  // weight (blendable(): weights below 1e-3 do not count).
+  // The corners of the blend and its weights.
   for (int j = 0; j < count; ++j) {
     const int x0 = static_cast<int>(u_safe[j]),
               y0 = static_cast<int>(v_safe[j]);
-    const int dx = x0 + 1 < W ? 1 : 0, dy = y0 + 1 < H ? W : 0;
-    const float tx = static_cast<float>(u_safe[j] - x0);
-    const float ty = static_cast<float>(v_safe[j] - y0);
-    const int i00 = y0 * W + x0;
-    const int lo_x = tx > 0.999f ? dx : 0, hi_x = tx > 1e-3f ? dx : 0;
-    const int lo_y = ty > 0.999f ? dy : 0, hi_y = ty > 1e-3f ? dy : 0;
-    at0[j] = i00 + lo_y + lo_x;
-    at1[j] = i00 + lo_y + hi_x;
-    at2[j] = i00 + hi_y + lo_x;
-    at3[j] = i00 + hi_y + hi_x;
-    corner[j] = i00;
-    step_x[j] = dx;
-    step_y[j] = dy;
-    t_x[j] = tx;
-    t_y[j] = ty;
+    corner[j] = y0 * W + x0;
+    step_x[j] = x0 + 1 < W ? 1 : 0;
+    step_y[j] = y0 + 1 < H ? W : 0;
+    t_x[j] = static_cast<float>(u_safe[j] - x0);
+    t_y[j] = static_cast<float>(v_safe[j] - y0);
   }
-  // The normals at the weight-carrying corners (a, b, c, e) and at the four
-  // corners of the blend (p00, p01, p10, p11), gathered.
-  float a[3][kChunk], b[3][kChunk], c[3][kChunk], e[3][kChunk];
+  // The normals at the four corners of the blend (p00, p01, p10, p11),
+  // gathered.
   float p00[3][kChunk], p01[3][kChunk], p10[3][kChunk], p11[3][kChunk];
   const float* const src[3] = {n0, n1, n2};
   for (int ch = 0; ch < 3; ++ch) {
     const float* __restrict p = src[ch];
-    for (int j = 0; j < count; ++j) {
-      a[ch][j] = p[at0[j]];
-      b[ch][j] = p[at1[j]];
-      c[ch][j] = p[at2[j]];
-      e[ch][j] = p[at3[j]];
-    }
     for (int j = 0; j < count; ++j) {
       const int i00 = corner[j];
       p00[ch][j] = p[i00];
@@ -187,10 +169,23 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
     }
   }
   for (int j = 0; j < count; ++j) {
+    // blendable()'s corners (weights below 1e-3 do not count): the low and
+    // high column and row that carry weight, picked among the four.
+    const bool lo_x = t_x[j] > 0.999f, hi_x = t_x[j] > 1e-3f;
+    const bool lo_y = t_y[j] > 0.999f, hi_y = t_y[j] > 1e-3f;
+    float a[3], b[3], c[3], e[3];
+    for (int ch = 0; ch < 3; ++ch) {
+      const float q00 = p00[ch][j], q01 = p01[ch][j];
+      const float q10 = p10[ch][j], q11 = p11[ch][j];
+      a[ch] = lo_y ? (lo_x ? q11 : q10) : (lo_x ? q01 : q00);
+      b[ch] = lo_y ? (hi_x ? q11 : q10) : (hi_x ? q01 : q00);
+      c[ch] = hi_y ? (lo_x ? q11 : q10) : (lo_x ? q01 : q00);
+      e[ch] = hi_y ? (hi_x ? q11 : q10) : (hi_x ? q01 : q00);
+    }
     // blendable(): all pairs of weight-carrying corners within
     // kMaxBlendDegrees (NaN fails).
-    auto dot = [&](const float(&p)[3][kChunk], const float(&q)[3][kChunk]) {
-      return p[0][j] * q[0][j] + p[1][j] * q[1][j] + p[2][j] * q[2][j];
+    auto dot = [](const float(&p)[3], const float(&q)[3]) {
+      return p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
     };
     const bool ab = dot(a, b) >= cos_blend, ac = dot(a, c) >= cos_blend;
     const bool ae = dot(a, e) >= cos_blend, bc = dot(b, c) >= cos_blend;
@@ -253,6 +248,7 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                             state.normals.plane(2)};
   float* n_cur[3] = {scratch.normals.plane(0), scratch.normals.plane(1),
                      scratch.normals.plane(2)};
+  const int rotated_groups = dual_warp == DualWarp::kReset ? 0 : dual_groups;
   // Rows in chunks of kChunk pixels: the chunk's source positions and the
   // warped normals first, then each dual group over the chunk.
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -268,19 +264,13 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
                        n_prev[1], n_prev[2], Rf, cos_blend, n_cur[0] + row,
                        n_cur[1] + row, n_cur[2] + row, corner, step_x, step_y,
                        t_x, t_y);
-      // The duals at the same positions, rotated (zero where no prediction),
-      // or all zero (DualWarp::kReset).
-      for (int g = 0; g < dual_groups; ++g) {
+      // The duals at the same positions, rotated (zero where no prediction);
+      // DualWarp::kReset zeroes them below.
+      for (int g = 0; g < rotated_groups; ++g) {
         const PlanarImage& src = dual_group(state, g);
         PlanarImage& dst = dual_group(scratch, g);
         const float* from[3] = {src.data(), src.data() + N, src.data() + 2 * N};
         float* to[3] = {dst.data(), dst.data() + N, dst.data() + 2 * N};
-        if (dual_warp == DualWarp::kReset) {
-          for (int c = 0; c < 3; ++c) {
-            std::fill(to[c] + row, to[c] + row + count, 0.0f);
-          }
-          continue;
-        }
         for (int j = 0; j < count; ++j) {
           float p[3] = {0.0f, 0.0f, 0.0f};
           if (corner[j] >= 0) {
@@ -290,6 +280,20 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
           for (int c = 0; c < 3; ++c) to[c][row + j] = p[c];
         }
       }
+    }
+  }
+  if (dual_warp == DualWarp::kReset && dual_groups > 0) {
+    // All duals zero: whole planes at once (large blocks, which the C
+    // library writes faster than the chunks' short runs), in as many parts
+    // as threads.
+    const int parts = 3 * dual_groups * threads;
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int part = 0; part < parts; ++part) {
+      const int plane = part / threads, share = part % threads;
+      float* to = dual_group(scratch, plane / 3).data() + (plane % 3) * N;
+      const std::size_t begin = N * share / threads;
+      const std::size_t end = N * (share + 1) / threads;
+      std::memset(to + begin, 0, (end - begin) * sizeof(float));
     }
   }
   internal::swapInWarped(state, scratch, has_duals);

@@ -195,8 +195,8 @@ void writePixel(SolverState& state, SolverState& warped, int groups,
 
 /// Row y of `warped` from the previous pixels `source[j]` (kNoWinner: none)
 /// of `state`: normals rotated by R and renormalized (NaN where none or
-/// degenerate), the duals rotated (zero where none) or, with
-/// DualWarp::kReset, zero; plane by plane, so that the loops stream.
+/// degenerate), the duals rotated (zero where none) unless
+/// DualWarp::kReset; plane by plane, so that the loops stream.
 void writeRow(const SolverState& state, SolverState& warped,
               std::uint64_t* source, int y, const float* R, DualWarp dual_warp,
               bool has_duals) {
@@ -223,7 +223,8 @@ void writeRow(const SolverState& state, SolverState& warped,
     }
     for (int c = 0; c < 3; ++c) out[c * N + j] = m[c];
   }
-  if (!has_duals) return;
+  // DualWarp::kReset: warpStateByMotion() zeroes the duals, whole planes.
+  if (!has_duals || dual_warp == DualWarp::kReset) return;
   const int groups = 2 + static_cast<int>(state.dual_data.size());
   for (int g = 0; g < groups; ++g) {
     const PlanarImage& src_image = g == 0   ? state.dual_h
@@ -233,12 +234,6 @@ void writeRow(const SolverState& state, SolverState& warped,
                              : g == 1 ? warped.dual_v
                                       : warped.dual_data[g - 2];
     float* dst = dst_image.data();
-    if (dual_warp == DualWarp::kReset) {
-      for (int c = 0; c < 3; ++c) {
-        std::fill(dst + c * N + row, dst + c * N + row + W, 0.0f);
-      }
-      continue;
-    }
     const float* src = src_image.data();
     for (int x = 0; x < W; ++x) {
       const std::size_t j = row + x;
@@ -379,6 +374,21 @@ void warpStateByMotion(SolverState& state, const ScalarMap& depth_prev_m,
     for (int b = 0; b < bands; ++b) {
       warpBand(state, scratch, H * b / bands, H * (b + 1) / bands, Rf, duals,
                has_duals);
+    }
+    if (has_duals && duals == DualWarp::kReset) {
+      // All duals zero: whole planes at once (large blocks, which the C
+      // library writes faster than rows), in as many parts as threads.
+      const std::size_t N = state.normals.pixelCount();
+      const int parts = 3 * (2 + L) * threads;
+#pragma omp for schedule(static)
+      for (int part = 0; part < parts; ++part) {
+        const int plane = part / threads, share = part % threads;
+        float* to =
+            planeGroup(scratch.state, 1 + plane / 3).data() + (plane % 3) * N;
+        const std::size_t begin = N * share / threads;
+        const std::size_t end = N * (share + 1) / threads;
+        std::memset(to + begin, 0, (end - begin) * sizeof(float));
+      }
     }
   }
   internal::swapInWarped(state, scratch.state, has_duals);

@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <random>
 
+#include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
 
 namespace normal_fusion {
@@ -116,6 +119,42 @@ TEST(EdgeWeights, ForwardDifferencesMarkExactlyTheLinkAcrossAnEdge) {
   const float w_max = computeEdgeWeights(step, settings).at(0, 5, 9);
   EXPECT_NEAR(w_max, std::exp(-5.0 * 0.6), 1e-4);
   EXPECT_NEAR(w_lum, std::exp(-5.0 * 0.6 * 0.587), 1e-3);
+}
+
+/// The one pass per row of the forward differences (the default) against
+/// the passes over whole planes: the same weights, bit for bit, for one and
+/// three channels, both weight functions, on a random image with a NaN.
+TEST(EdgeWeights, OnePassMatchesThePassByPassOracle) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> value(0.0f, 1.0f);
+  for (int channels : {1, 3}) {
+    ColorImage image(37, 23, channels, 0.0f);
+    for (std::size_t i = 0; i < image.pixelCount() * channels; ++i) {
+      image.data()[i] = value(random);
+    }
+    image.at(0, 5, 7) = std::numeric_limits<float>::quiet_NaN();
+    for (EdgeWeightFunction function :
+         {EdgeWeightFunction::kExponential, EdgeWeightFunction::kRational}) {
+      for (double beta : {1.0, 0.7}) {
+        EdgeWeightSettings settings;
+        ASSERT_EQ(settings.gradient, EdgeGradient::kForwardDifference);
+        settings.function = function;
+        settings.beta = beta;
+        internal::EdgeWeightScratch scratch;
+        PlanarImage one_pass, oracle;
+        internal::computeEdgeWeightsInto(image, settings, one_pass, scratch, 2);
+        internal::computeEdgeWeightsPassByPass(image, settings, oracle, scratch,
+                                               1);
+        ASSERT_EQ(one_pass.pixelCount(), oracle.pixelCount());
+        int differing = 0;
+        for (std::size_t i = 0; i < 2 * oracle.pixelCount(); ++i) {
+          const float a = one_pass.data()[i], b = oracle.data()[i];
+          differing += !(a == b || (std::isnan(a) && std::isnan(b)));
+        }
+        EXPECT_EQ(differing, 0) << channels << " channels, beta " << beta;
+      }
+    }
+  }
 }
 
 }  // namespace

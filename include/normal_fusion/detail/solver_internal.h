@@ -454,11 +454,19 @@ struct EdgeWeightScratch {
   std::size_t bytesHeld() const;
 };
 
-/// computeEdgeWeights() into reused buffers, with `threads` threads.
+/// computeEdgeWeights() into reused buffers, with `threads` threads. The
+/// forward differences of the unsmoothed image (the default) take one pass
+/// per row; the other settings computeEdgeWeightsPassByPass().
 void computeEdgeWeightsInto(const ColorImage& image,
                             const EdgeWeightSettings& settings,
                             PlanarImage& weights, EdgeWeightScratch& scratch,
                             int threads);
+/// The same in passes over whole planes (luminance, smoothing, gradients,
+/// weights) for any settings: the oracle of the one-pass case.
+void computeEdgeWeightsPassByPass(const ColorImage& image,
+                                  const EdgeWeightSettings& settings,
+                                  PlanarImage& weights,
+                                  EdgeWeightScratch& scratch, int threads);
 
 /// Validates the problem and builds the finest level (its guide points to the
 /// problem's image, which must outlive it): f_l in the optical
