@@ -82,6 +82,12 @@ struct SolverSettings {
       settings_default::lambda;  ///< global data weight (the paper's lambda)
   double huber_eps = settings_default::huber_eps;  ///< Huber threshold; 0 =
                                                    ///< plain total variation
+  /// Second-order smoothness (total generalized variation of order 2):
+  /// the smoothness term becomes min_v sum w_d |grad_d n - v_d| + alpha0
+  /// |E v|, so that normals varying linearly (curved surfaces) cost nothing;
+  /// 0 = off. Runs on the reference backend whatever `backend` says
+  /// (docs/method.md).
+  double tgv_alpha0 = settings_default::tgv_alpha0;
   DataPenalty penalty = settings_default::penalty;
   VisibilityMode visibility = settings_default::visibility;
   EdgeWeightSettings edges;

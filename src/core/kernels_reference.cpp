@@ -25,6 +25,7 @@ void IterationState::fit(int width, int height, int threads) {
     releaseIfOversized(*image, values);
   }
   for (PlanarImage& q_l : q) releaseIfOversized(q_l, values);
+  if (values < tgv.v_h.bytesHeld() / sizeof(float) / 4) tgv.release();
   // The fast backend's rows: three per thread.
   releaseIfOversized(row_scratch,
                      static_cast<std::size_t>(3) * width * threads);
@@ -37,7 +38,7 @@ std::size_t IterationState::bytesHeld() const {
     bytes += image->bytesHeld();
   }
   for (const PlanarImage& q_l : q) bytes += q_l.bytesHeld();
-  return bytes + internal::bytesHeld(row_scratch) +
+  return bytes + tgv.bytesHeld() + internal::bytesHeld(row_scratch) +
          internal::bytesHeld(progress);
 }
 

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "normal_fusion/detail/solver_levels.h"
+#include "normal_fusion/detail/tgv.h"
 #include "normal_fusion/errors.h"
 #include "solver_impl.h"
 
@@ -38,7 +39,10 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   deadline_.start(budget_start, settings_.time_budget_ms);
   threads_ = resolveThreadCount(settings_.num_threads);
   if (refine_threads_.maxThreads() != threads_) refine_threads_.reset(threads_);
-  backend_ = &internal::kernelBackend(settings_.backend);
+  // The second-order term runs on the reference backend only.
+  backend_ = settings_.tgv_alpha0 > 0.0
+                 ? &internal::tgvReferenceBackend()
+                 : &internal::kernelBackend(settings_.backend);
   cancelled_ = false;
   resetReport(report);
 
@@ -90,6 +94,12 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
       startWarm(level, out, report);
     } else {
       startCold(level, li + 1 < num_levels);
+    }
+    // v and r start from 0 at every level (E(n0, 0) is the first-order E).
+    if (settings_.tgv_alpha0 > 0.0) {
+      state_.tgv.reset(level.width, level.height);
+    } else if (!state_.tgv.empty()) {
+      state_.tgv.release();
     }
     if (!cancelled() && levelRuns(warm_finest, report)) {
       runLevel(level, li == 0, report);
@@ -230,13 +240,16 @@ void SolverImpl::writeOutput(SolverState& out, int W, int H, int L) {
 
 InnerParams SolverImpl::stepSizes(int num_inputs, double balance) const {
   InnerParams params;
-  const double K_norm2 = 8.0 + num_inputs;
+  const double K_norm2 =
+      (settings_.tgv_alpha0 > 0.0 ? internal::kTgvOperatorNorm2 : 8.0) +
+      num_inputs;
   if (settings_.tau > 0.0) {
     if (settings_.tau * settings_.sigma * K_norm2 >= 1.0) {
       std::ostringstream msg;
       msg << "settings tau = " << settings_.tau
           << ", sigma = " << settings_.sigma
-          << ": expected tau * sigma * (8 + L) < 1, got "
+          << ": expected tau * sigma * (8 + L) < 1 (12 + L with tgv_alpha0 > "
+             "0), got "
           << settings_.tau * settings_.sigma * K_norm2;
       throw ParameterError(msg.str());
     }
@@ -271,6 +284,9 @@ InnerParams SolverImpl::innerParams(const PreparedLevel& level,
   params.num_threads = threads_;
   params.block_depth = kBlockDepth;
   params.cancel = &cancel_request_;
+  internal::setTgvSteps(settings_.tgv_alpha0,
+                        settings_.preconditioning && !(settings_.tau > 0.0),
+                        balance, params);
   return params;
 }
 

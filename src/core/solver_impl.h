@@ -104,7 +104,8 @@ class SolverImpl {
   internal::InnerParams innerParams(const internal::PreparedLevel& level,
                                     double balance) const;
   internal::EnergyTerms energyTerms() const {
-    return {settings_.huber_eps, settings_.penalty};
+    return {settings_.huber_eps, settings_.penalty, settings_.tgv_alpha0,
+            &state_.tgv};
   }
   /// True once this solve has seen the cancel request (latched for the rest
   /// of the solve, so that a request withdrawn meanwhile does not undo what

@@ -26,6 +26,9 @@ struct RefinementBuffers {
 struct EnergyTerms {
   double huber_eps = 0.0;
   DataPenalty penalty = DataPenalty::kL2;
+  /// The second-order term: its weight and the v that E(n, v) is taken at.
+  double tgv_alpha0 = 0.0;
+  const TgvState* tgv = nullptr;
 };
 
 class KernelBackend {

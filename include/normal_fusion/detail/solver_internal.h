@@ -7,6 +7,7 @@
 #include <cmath>
 #include <vector>
 
+#include "normal_fusion/detail/tgv_state.h"
 #include "normal_fusion/settings.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/types.h"
@@ -88,6 +89,7 @@ struct InnerParams {
   bool soft_visibility = false;
   int num_threads = 1;
   int block_depth = 6;  ///< iterations per thread per sweep (fast backend)
+  TgvParams tgv;        ///< the second-order term (alpha0 = 0: off)
   /// Stop request (Solver::requestCancel()), or null: none. The kernels
   /// read it between rows (fast backend) or iterations and return early
   /// once it is set.
@@ -107,6 +109,7 @@ struct IterationState {
   PlanarImage p_h;   ///< dual of the horizontal differences, 3 planes
   PlanarImage p_v;   ///< dual of the vertical differences, 3 planes
   std::vector<PlanarImage> q;  ///< duals of the data terms, 3 planes each
+  TgvState tgv;  ///< v and r of the second-order term (empty while off)
   // Scratch of the reference backend: gradients, divergence, data-dual sum
   // (sized by runInnerReference(), so the fast backend holds none).
   PlanarImage grad_h, grad_v, div, q_sum;
