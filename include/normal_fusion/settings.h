@@ -113,6 +113,15 @@ struct SolverSettings {
   double density_power = settings_default::density_power;
   /// Half-size of the window of s(x) and of the density, in pixels (>= 1).
   int local_radius = settings_default::local_radius;
+  /// Noise estimate across scales (docs/algorithm.md): the median spread
+  /// of each input at radii local_radius, 2 local_radius, ... up to
+  /// noise_radius, read as white noise would be; its gain g = the largest
+  /// ratio of a wider radius's to the local one's (1 for white noise, more
+  /// where neighbouring pixels share their error). With noise_radius >
+  /// local_radius, delta(x) = data_eps + g data_eps_local s(x) and c(x) *=
+  /// g^-noise_weight_power. Fixed before the solve. 0 = off.
+  int noise_radius = settings_default::noise_radius;
+  double noise_weight_power = settings_default::noise_weight_power;
   /// Edge weights of the links between two pixels that no input observes are
   /// multiplied by this, in (0, 1] (1 = off): a pixel next to an
   /// observed surface and inside a hole (a dropout, a silhouette's rim)

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "normal_fusion/detail/multiversion.h"
+#include "normal_fusion/detail/noise_estimate.h"
 #include "normal_fusion/detail/solver_internal.h"
 
 namespace normal_fusion {
@@ -137,6 +138,31 @@ long countValidPixels(const PreparedLevel& level, int threads) {
   return valid;
 }
 
+/// applyLocalStatistics() with the input's noise gain g across scales
+/// (estimateNoise()): delta = data_eps + g data_eps_local s, so that the
+/// threshold reads the noise a wide window sees where the local one misses
+/// what neighbours share, and c *= g^-noise_weight_power, since such an
+/// input's neighbouring pixels repeat one error rather than average it.
+void applyNoiseGain(const SolverSettings& settings, const PlanarImage& data,
+                    PlanarImage& data_eps, PlanarImage& data_weight,
+                    PlanarImage* mean_spread, int threads) {
+  const float gain =
+      estimateNoise(data, settings.local_radius, settings.noise_radius, threads)
+          .gain;
+  SolverSettings scaled = settings;
+  scaled.data_eps_local *= gain;
+  applyLocalStatistics(scaled, data, data_eps, data_weight, mean_spread,
+                       threads);
+  if (settings.noise_weight_power > 0.0 && gain > 1.0f) {
+    // c <- c g^-p (fixed before the solve, like the density correction).
+    const float factor = static_cast<float>(
+        std::pow(static_cast<double>(gain), -settings.noise_weight_power));
+    float* c = data_weight.plane(0);
+    const std::size_t pixels = data_weight.pixelCount();
+    for (std::size_t i = 0; i < pixels; ++i) c[i] *= factor;
+  }
+}
+
 }  // namespace
 
 bool prepareFinestInto(const FusionProblem& problem,
@@ -182,9 +208,15 @@ bool prepareFinestInto(const FusionProblem& problem,
     if (stopRequested(cancel)) return false;
     level.data_eps[l].resize(W, H, 1);
     if (means) level.data_mean[l].resize(W, H, 4);
-    applyLocalStatistics(settings, level.data[l], level.data_eps[l],
-                         level.data_weight[l],
-                         means ? &level.data_mean[l] : nullptr, threads);
+    if (settings.noise_radius > settings.local_radius) {
+      applyNoiseGain(settings, level.data[l], level.data_eps[l],
+                     level.data_weight[l],
+                     means ? &level.data_mean[l] : nullptr, threads);
+    } else {
+      applyLocalStatistics(settings, level.data[l], level.data_eps[l],
+                           level.data_weight[l],
+                           means ? &level.data_mean[l] : nullptr, threads);
+    }
   }
   return true;
 }
@@ -224,42 +256,6 @@ void weakenHoleLinks(PreparedLevel& level, float factor, int threads) {
 }
 
 namespace {
-
-/// Adds one row of f (3 planes) and its validity (f != 0) to the column sums.
-NF_MULTIVERSION
-void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
-                const float* __restrict fz, float* __restrict sx,
-                float* __restrict sy, float* __restrict sz,
-                float* __restrict count) {
-  for (int x = 0; x < W; ++x) {
-    sx[x] += fx[x];
-    sy[x] += fy[x];
-    sz[x] += fz[x];
-    count[x] +=
-        fx[x] * fx[x] + fy[x] * fy[x] + fz[x] * fz[x] > 0.0f ? 1.0f : 0.0f;
-  }
-}
-
-/// out(x) = sum of in(u), u = x - r .. x + r inside the row.
-NF_MULTIVERSION
-void windowSums(int W, int r, const float* __restrict in,
-                float* __restrict out) {
-  auto border = [&](int x) {
-    float sum = 0.0f;
-    for (int u = std::max(0, x - r); u <= std::min(W - 1, x + r); ++u) {
-      sum += in[u];
-    }
-    out[x] = sum;
-  };
-  const int lo = std::min(r, W), hi = std::max(lo, W - r);
-  for (int x = 0; x < lo; ++x) border(x);
-  for (int x = hi; x < W; ++x) border(x);
-  // Interior: whole windows, one shifted row at a time (vectorised).
-  for (int x = lo; x < hi; ++x) out[x] = in[x - r];
-  for (int d = 1 - r; d <= r; ++d) {
-    for (int x = lo; x < hi; ++x) out[x] += in[x + d];
-  }
-}
 
 /// The thresholds delta, the density ratios and the spreads (-1 below 2
 /// samples) of one row from its window sums (resultant s, valid count n) and

@@ -44,6 +44,10 @@ std::string settingsText(const nf::SolverSettings& s) {
     out << ", tau " << s.tau << ", sigma " << s.sigma;
   }
   if (s.time_budget_ms > 0.0) out << ", budget " << s.time_budget_ms << " ms";
+  if (s.noise_radius > s.local_radius) {
+    out << ", noise radius " << s.noise_radius << ", noise weight power "
+        << s.noise_weight_power;
+  }
   out << ", backend " << nf::toString(s.backend);
   return out.str();
 }

@@ -1,0 +1,57 @@
+// The per-input noise estimate across scales (SolverSettings::noise_radius):
+// how much an input's spread grows from the local window to wider ones. White
+// noise spreads alike at every scale; noise that neighbouring pixels share (a
+// plane fit over a window, a stereo block match) hides from a small window and
+// shows in a wide one.
+#pragma once
+
+#include <array>
+
+#include "normal_fusion/types.h"
+
+namespace normal_fusion {
+namespace internal {
+
+/// Adds one row of f (3 planes) and its validity (f != 0) to the column sums.
+void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
+                const float* __restrict fz, float* __restrict sx,
+                float* __restrict sy, float* __restrict sz,
+                float* __restrict count);
+
+/// out(x) = sum of in(u), u = x - r .. x + r inside the row.
+void windowSums(int W, int r, const float* __restrict in,
+                float* __restrict out);
+
+/// The noise level of each pixel of f (3 planes, unit or 0 where missing) in
+/// the (2 r + 1)^2 window around it, as white noise would read it:
+///   sigma_r(x) = s_r(x) / sqrt(1 - 1 / n_r(x)),
+/// s_r = sqrt(2 (1 - |sum f| / n_r)) the RMS spread around the window's mean
+/// and n_r the window's valid pixels (the factor undoes the spread's bias for
+/// n_r independent samples); -1 below 2 samples. `out`: W * H values.
+void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
+                          int threads);
+
+/// The most scales of a NoiseEstimate (radii r0, 2 r0, 4 r0, ...).
+constexpr int kMaxNoiseScales = 8;
+
+/// One input's noise across scales.
+struct NoiseEstimate {
+  int scales = 0;
+  std::array<int, kMaxNoiseScales> radius{};
+  /// Median of sigma_r over the pixels with 2 samples at the smallest radius.
+  std::array<float, kMaxNoiseScales> sigma{};
+  /// max over the scales of sigma_r / sigma_r0, at least 1 (also where the
+  /// input has too few samples), at most (2 r_max + 1) / (2 r0 + 1): about 1
+  /// for white noise, growing with the noise's correlation length where
+  /// neighbours share their error.
+  float gain = 1.0f;
+};
+
+/// The estimate of f at radii base_radius, 2 base_radius, 4 base_radius, ...
+/// up to max_radius (max_radius itself the last one). Buffers grown once per
+/// thread, then reused.
+NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
+                            int max_radius, int threads);
+
+}  // namespace internal
+}  // namespace normal_fusion
