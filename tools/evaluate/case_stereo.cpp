@@ -27,13 +27,15 @@ constexpr int kCameraStream = 12;
 constexpr int kMatchScale = 2;
 
 /// Plane-fit normals of stereo depth and their confidence, the noise
-/// coefficient from f and b.
-nf::NormalMap stereoNormals(const nf::ScalarMap& disparity,
+/// coefficient from f and b, s0 from the options.
+nf::NormalMap stereoNormals(const Options& options,
+                            const nf::ScalarMap& disparity,
                             const nf::CameraIntrinsics& K, double baseline_m,
                             nf::ScalarMap* confidence) {
   nf::depth::DepthNormalSettings settings;
   settings.method = nf::depth::NormalMethod::kPlaneFit;
   settings.noise_coefficient = kDisparitySigmaPx / (K.fx() * baseline_m);
+  settings.normal_sigma_scale = options.confidence_sigma_scale;
   nf::NormalMap normals;
   nf::depth::depthToNormals(
       nf::stereo::depthFromDisparity(disparity, K.fx(), baseline_m), K,
@@ -135,7 +137,8 @@ StereoOutcome runStereoCase(const Options& options, Timers* timers) {
     }
     outcome.depth_share += shareWithValue(disparity) / n;
     nf::ScalarMap confidence;
-    const nf::NormalMap input = stereoNormals(disparity, K, b, &confidence);
+    const nf::NormalMap input =
+        stereoNormals(options, disparity, K, b, &confidence);
     SceneData scene;
     scene.scene_id = id;
     scene.image = left.image;
@@ -180,7 +183,7 @@ AloeOutcome runAloeCase(const Options& options, Timers* timers) {
       nf::stereo::sgbmDisparity(data.left, data.right, sgbm);
   nf::ScalarMap confidence;
   const nf::NormalMap input =
-      stereoNormals(disparity, data.K, data.baseline_m, &confidence);
+      stereoNormals(options, disparity, data.K, data.baseline_m, &confidence);
   // What the whole-pixel steps leave in the ground truth: its fit over a
   // window of half the size against the one used.
   const nf::NormalMap gt_small_window = nf::aloe::normalsFromDisparity(

@@ -75,7 +75,7 @@ CaseResult finishWithConfidence(CaseRunner& runner, const std::string& id,
   return result;
 }
 
-nf::NormalMap cameraNormals(const syn::Frame& frame,
+nf::NormalMap cameraNormals(const Options& options, const syn::Frame& frame,
                             const syn::DepthCameraModel& camera,
                             nf::depth::NormalMethod method, std::uint64_t seed,
                             nf::ScalarMap* confidence) {
@@ -83,6 +83,7 @@ nf::NormalMap cameraNormals(const syn::Frame& frame,
   nf::depth::DepthNormalSettings settings;
   settings.method = method;
   settings.noise_coefficient = camera.noise_coefficient;
+  settings.normal_sigma_scale = options.confidence_sigma_scale;
   nf::NormalMap normals;
   nf::depth::depthToNormals(depth, frame.K, settings, normals, confidence);
   return normals;
@@ -112,8 +113,8 @@ std::vector<CaseResult> runTexturedCase(const Options& options,
       const int id = kTexturedScenes[s];
       nf::ScalarMap confidence;
       const nf::NormalMap input = cameraNormals(
-          frames[s], camera, method, noiseSeed(options, id, kCameraStream, 0.0),
-          &confidence);
+          options, frames[s], camera, method,
+          noiseSeed(options, id, kCameraStream, 0.0), &confidence);
       const std::vector<nf::NormalMap> regularized =
           runner.addScene(sceneOf(id, frames[s], name, input, &confidence));
       if (s == 0 && method == nf::depth::NormalMethod::kPlaneFit) {
@@ -156,9 +157,10 @@ std::vector<CaseResult> runCurvedCase(const Options& options, Timers* timers) {
               ? syn::addPaperNoise(frames[s].normals_gt, options.curved_sigma,
                                    noiseSeed(options, id, kCurvedPaperStream,
                                              options.curved_sigma))
-              : cameraNormals(
-                    frames[s], camera, nf::depth::NormalMethod::kPlaneFit,
-                    noiseSeed(options, id, kCameraStream, 0.0), &confidence);
+              : cameraNormals(options, frames[s], camera,
+                              nf::depth::NormalMethod::kPlaneFit,
+                              noiseSeed(options, id, kCameraStream, 0.0),
+                              &confidence);
       runner.addScene(sceneOf(id, frames[s], name, input,
                               input_kind == 0 ? nullptr : &confidence));
     }
@@ -191,7 +193,7 @@ std::vector<CaseResult> runDepthCameraCase(
         const int id = options.scenes[s];
         nf::ScalarMap confidence;
         const nf::NormalMap input = cameraNormals(
-            frames[s], camera, method,
+            options, frames[s], camera, method,
             noiseSeed(options, id, kCameraStream, 0.0), &confidence);
         runner.addScene(sceneOf(id, frames[s], name, input, &confidence));
       }

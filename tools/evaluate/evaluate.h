@@ -94,6 +94,9 @@ struct Options {
   // Robot-like inputs.
   double curved_sigma = 0.3;       ///< paper noise of the curved case
   double stereo_baseline_m = 0.1;  ///< the rendered pair's baseline
+  /// s0 of the depth normals' confidence in the robot cases.
+  double confidence_sigma_scale =
+      nf::depth::DepthNormalSettings().normal_sigma_scale;
   std::string aloe_dir = nf::aloe::kDefaultDirectory;
   bool help = false;
 };
@@ -327,8 +330,10 @@ std::vector<CaseResult> runFusionCase(
 
 /// Normals of a simulated depth camera's depth, computed as a driver user
 /// does: depth::depthToNormals at its defaults, `method`, with the camera's
-/// noise coefficient; their confidence too when `confidence` is given.
-nf::NormalMap cameraNormals(const nf::synthetic::Frame& frame,
+/// noise coefficient; their confidence too (with s0 =
+/// options.confidence_sigma_scale) when `confidence` is given.
+nf::NormalMap cameraNormals(const Options& options,
+                            const nf::synthetic::Frame& frame,
                             const nf::synthetic::DepthCameraModel& camera,
                             nf::depth::NormalMethod method, std::uint64_t seed,
                             nf::ScalarMap* confidence = nullptr);
