@@ -28,7 +28,7 @@
 // (the relative jump plus the noise of a difference of two depths).
 //
 // Confidence, in [0, 1], 0 where the normal is unknown:
-//   c = exp(-(sigma_n / s0)^2) * |n . v| * min(1, d_edge / r)
+//   c = exp(-(sigma_n / s0)^2) * min(1, |n . v| + sigma_n) * min(1, d_edge / r)
 //   sigma_n: the angular standard deviation (radians) of the normal from the
 //     depth noise (sigma_{1/z} = a): with S the inverse of the fit's normal
 //     matrix sum (du, dv, 1)(du, dv, 1)^T over the neighbours used (for
@@ -37,6 +37,10 @@
 //     (first order; d = the plane's distance to the camera centre). It grows
 //     about linearly with depth and falls with the window size.
 //   |n . v|: v the unit viewing ray; 1 facing the camera, 0 at grazing view.
+//     It is taken of the noisy normal, so it is known only to within
+//     sigma_n and is raised by it (capped at 1): a normal that its noise
+//     makes uncertain is discounted by the noise term, not again by a view
+//     angle that the same noise drew.
 //   d_edge: city-block distance in pixels from the pixel centre to the
 //     nearest depth discontinuity between two 4-neighbours (0.5 next to one);
 //     r = edge_distance (0: no edge factor).
@@ -96,7 +100,8 @@ inline double discontinuityThreshold(double z, const DepthNormalSettings& s) {
 }
 
 /// The confidence formula of the header comment: sigma_n in radians,
-/// cos_view = |n . v|, edge_distance_px = d_edge. NaN sigma_n gives 0.
+/// cos_view = |n . v| (raised by sigma_n here), edge_distance_px = d_edge.
+/// NaN sigma_n gives 0.
 inline double confidenceOf(double sigma_n, double cos_view,
                            double edge_distance_px,
                            const DepthNormalSettings& s) {
@@ -105,7 +110,8 @@ inline double confidenceOf(double sigma_n, double cos_view,
   const double edge = s.edge_distance > 0.0
                           ? std::min(1.0, edge_distance_px / s.edge_distance)
                           : 1.0;
-  const double c = std::exp(-q * q) * std::min(1.0, std::abs(cos_view)) * edge;
+  const double c =
+      std::exp(-q * q) * std::min(1.0, std::abs(cos_view) + sigma_n) * edge;
   return c >= 0.0 ? c : 0.0;
 }
 

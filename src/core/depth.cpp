@@ -100,8 +100,12 @@ inline float confidenceAt(const ConfidenceConstants& k, float variance_unit,
                           float d, float n_dot_r, float r_norm2,
                           float edge_px) {
   // sigma_n^2 = a^2 d^2 (...), then exp(-(sigma_n / s0)^2).
-  const float q = k.a2 * d * d * variance_unit * k.inv_s0_2;
-  const float cos_view = std::min(std::abs(n_dot_r) / std::sqrt(r_norm2), 1.0f);
+  const float sigma2 = k.a2 * d * d * variance_unit;
+  const float q = sigma2 * k.inv_s0_2;
+  // min(1, |n . v| + sigma_n): the view factor of a noisy normal (|n . v| is
+  // as uncertain as n itself).
+  const float cos_view = std::min(
+      std::abs(n_dot_r) / std::sqrt(r_norm2) + std::sqrt(sigma2), 1.0f);
   const float edge =
       k.edge_enabled ? std::min(edge_px * k.inv_edge, 1.0f) : 1.0f;
   const float c = expNeg(q) * cos_view * edge;

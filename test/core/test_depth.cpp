@@ -392,6 +392,27 @@ TEST(DepthNormals, ConfidenceRisesWithTheDistanceToADiscontinuity) {
   EXPECT_NEAR(c.at(0, v, W / 2), std::abs(unit(ray(K, W / 2, v)).z), 1e-3);
 }
 
+/// The view factor is min(1, |n . v| + sigma_n): on an exact plane 60
+/// degrees from the view, with the noise term's exp made flat (s0 large),
+/// c - |n . v| is sigma_n, which grows in proportion to a.
+TEST(DepthNormals, ViewFactorIsRaisedBySigmaN) {
+  for (nd::NormalMethod method : kMethods) {
+    nd::DepthNormalSettings settings = withMethod(method);
+    settings.normal_sigma_scale = 100.0;
+    const double t = 60.0 * kPi / 180.0;
+    const Vec n{std::sin(t), 0, -std::cos(t)};
+    settings.noise_coefficient = 0.0;
+    const double view = centreConfidence(settings, n, 0.5);
+    settings.noise_coefficient = 0.0005;
+    const double raise_1 = centreConfidence(settings, n, 0.5) - view;
+    settings.noise_coefficient = 0.001;
+    const double raise_2 = centreConfidence(settings, n, 0.5) - view;
+    EXPECT_GT(raise_1, 0.002) << nd::toString(method);
+    EXPECT_LT(raise_2, 0.4) << nd::toString(method);  // below the cap at 1
+    EXPECT_NEAR(raise_2 / raise_1, 2.0, 0.02) << nd::toString(method);
+  }
+}
+
 /// The noise model's sigma_n against the spread of the normals of noisy
 /// depth: a frontal wall with sigma_z = a z^2, many seeds.
 TEST(DepthNormals, SigmaNMatchesTheMeasuredSpread) {
@@ -417,13 +438,14 @@ TEST(DepthNormals, SigmaNMatchesTheMeasuredSpread) {
       nf::NormalMap n;
       nf::ScalarMap c;
       nd::depthToNormals(noisy, K, settings, n, &c);
-      for (int v = 8; v < H - 8; v += 3) {
-        for (int u = 8; u < W - 8; u += 3) {
+      // Within 5 pixels of the principal point the rays are within 0.13 rad
+      // of the axis, so min(1, |n . v| + sigma_n) is 1 (sigma_n about 0.02 -
+      // 0.09 rad here) and c = exp(-(sigma_n / s0)^2).
+      for (int v = H / 2 - 5; v <= H / 2 + 5; ++v) {
+        for (int u = W / 2 - 5; u <= W / 2 + 5; ++u) {
           const double angle = angleDeg(n, s.normals, v, u) * kPi / 180.0;
           sum_sq += angle * angle;
-          // c = exp(-(sigma_n / s0)^2) |n . v|.
-          const double view = std::abs(unit(ray(K, u, v)).z);
-          const double q = -std::log(c.at(0, v, u) / view);
+          const double q = -std::log(c.at(0, v, u));
           predicted_sq +=
               q * settings.normal_sigma_scale * settings.normal_sigma_scale;
           ++count;

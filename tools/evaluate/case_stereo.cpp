@@ -26,16 +26,20 @@ constexpr int kCameraStream = 12;
 /// camera matches at its sensor's resolution; the disparity is reduced.
 constexpr int kMatchScale = 2;
 
-/// Plane-fit normals of stereo depth, the noise coefficient from f and b.
-nf::NormalMap stereoNormals(const nf::ScalarMap& disparity,
-                            const nf::CameraIntrinsics& K, double baseline_m) {
+/// Plane-fit normals of stereo depth and their confidence, the noise
+/// coefficient from f and b, s0 from the options.
+nf::NormalMap stereoNormals(const Options& options,
+                            const nf::ScalarMap& disparity,
+                            const nf::CameraIntrinsics& K, double baseline_m,
+                            nf::ScalarMap* confidence) {
   nf::depth::DepthNormalSettings settings;
   settings.method = nf::depth::NormalMethod::kPlaneFit;
   settings.noise_coefficient = kDisparitySigmaPx / (K.fx() * baseline_m);
+  settings.normal_sigma_scale = options.confidence_sigma_scale;
   nf::NormalMap normals;
   nf::depth::depthToNormals(
       nf::stereo::depthFromDisparity(disparity, K.fx(), baseline_m), K,
-      settings, normals);
+      settings, normals, confidence);
   return normals;
 }
 
@@ -132,7 +136,9 @@ StereoOutcome runStereoCase(const Options& options, Timers* timers) {
           n;
     }
     outcome.depth_share += shareWithValue(disparity) / n;
-    const nf::NormalMap input = stereoNormals(disparity, K, b);
+    nf::ScalarMap confidence;
+    const nf::NormalMap input =
+        stereoNormals(options, disparity, K, b, &confidence);
     SceneData scene;
     scene.scene_id = id;
     scene.image = left.image;
@@ -140,7 +146,7 @@ StereoOutcome runStereoCase(const Options& options, Timers* timers) {
     scene.gt = left.normals_gt;
     scene.inputs = {{"normals of SGBM depth (plane_fit)", input}};
     scene.filter_inputs = {input};
-    scene.runs = {{"regularizer", {inputOf(input)}}};
+    scene.runs = runsWithConfidence(input, confidence);
     const std::vector<nf::NormalMap> regularized = runner.addScene(scene);
     if (!outcome.example.taken) {
       takeExample("stereo_scene" + std::to_string(id),
@@ -150,8 +156,8 @@ StereoOutcome runStereoCase(const Options& options, Timers* timers) {
     std::cerr << "evaluate: stereo case, scene " << id << " done\n";
   }
   outcome.ran = true;
-  outcome.result = runner.finish(
-      "stereo",
+  outcome.result = finishWithConfidence(
+      runner, "stereo",
       "Stereo: normals of OpenCV SGBM depth of a rendered pair (scenes " +
           std::to_string(kStereoScenes[0]) + ", " +
           std::to_string(kStereoScenes[1]) + ", " +
@@ -175,7 +181,9 @@ AloeOutcome runAloeCase(const Options& options, Timers* timers) {
   sgbm.num_disparities = searchRange(data.disparity_gt);
   const nf::ScalarMap disparity =
       nf::stereo::sgbmDisparity(data.left, data.right, sgbm);
-  const nf::NormalMap input = stereoNormals(disparity, data.K, data.baseline_m);
+  nf::ScalarMap confidence;
+  const nf::NormalMap input =
+      stereoNormals(options, disparity, data.K, data.baseline_m, &confidence);
   // What the whole-pixel steps leave in the ground truth: its fit over a
   // window of half the size against the one used.
   const nf::NormalMap gt_small_window = nf::aloe::normalsFromDisparity(
@@ -211,13 +219,14 @@ AloeOutcome runAloeCase(const Options& options, Timers* timers) {
   scene.gt = data.normals_gt;
   scene.inputs = {{"normals of SGBM depth (plane_fit)", input}};
   scene.filter_inputs = {input};
-  scene.runs = {{"regularizer", {inputOf(input)}}};
+  scene.runs = runsWithConfidence(input, confidence);
   const std::vector<nf::NormalMap> regularized = runner.addScene(scene);
   takeExample("aloe", "SGBM on the real pair", scene, regularized.front(),
               &outcome.example);
   outcome.ran = true;
-  outcome.result = runner.finish(
-      "aloe", "Real stereo: Middlebury Aloe, normals of OpenCV SGBM depth");
+  outcome.result = finishWithConfidence(
+      runner, "aloe",
+      "Real stereo: Middlebury Aloe, normals of OpenCV SGBM depth");
   std::cerr << "evaluate: aloe case done\n";
   return outcome;
 }

@@ -30,8 +30,11 @@ std::vector<syn::Frame> renderAll(const Options& options,
   return frames;
 }
 
+/// A scene of one input; `confidence` (when given) adds the regularizer run
+/// with it.
 SceneData sceneOf(int id, const syn::Frame& frame, const std::string& name,
-                  const nf::NormalMap& input) {
+                  const nf::NormalMap& input,
+                  const nf::ScalarMap* confidence = nullptr) {
   SceneData scene;
   scene.scene_id = id;
   scene.image = frame.image;
@@ -39,7 +42,11 @@ SceneData sceneOf(int id, const syn::Frame& frame, const std::string& name,
   scene.gt = frame.normals_gt;
   scene.inputs = {{name, input}};
   scene.filter_inputs = {input};
-  scene.runs = {{"regularizer", {inputOf(input)}}};
+  scene.runs =
+      confidence != nullptr
+          ? runsWithConfidence(input, *confidence)
+          : std::vector<std::pair<std::string, std::vector<nf::NormalInput>>>{
+                {"regularizer", {inputOf(input)}}};
   return scene;
 }
 
@@ -49,16 +56,36 @@ std::string methodName(nf::depth::NormalMethod method) {
 
 }  // namespace
 
-nf::NormalMap cameraNormals(const syn::Frame& frame,
+const char* const kConfidenceRun = "regularizer, with confidence";
+
+std::vector<std::pair<std::string, std::vector<nf::NormalInput>>>
+runsWithConfidence(const nf::NormalMap& normals,
+                   const nf::ScalarMap& confidence) {
+  nf::NormalInput weighted = inputOf(normals);
+  weighted.confidence = confidence;
+  return {{"regularizer", {inputOf(normals)}}, {kConfidenceRun, {weighted}}};
+}
+
+CaseResult finishWithConfidence(CaseRunner& runner, const std::string& id,
+                                const std::string& title) {
+  CaseResult result = runner.finish(id, title);
+  // The runs are the last rows: plain, then with confidence.
+  result.confidence_row = result.regularizer_row;
+  result.regularizer_row -= 1;
+  return result;
+}
+
+nf::NormalMap cameraNormals(const Options& options, const syn::Frame& frame,
                             const syn::DepthCameraModel& camera,
-                            nf::depth::NormalMethod method,
-                            std::uint64_t seed) {
+                            nf::depth::NormalMethod method, std::uint64_t seed,
+                            nf::ScalarMap* confidence) {
   const nf::ScalarMap depth = syn::simulateDepthCamera(frame, camera, seed);
   nf::depth::DepthNormalSettings settings;
   settings.method = method;
   settings.noise_coefficient = camera.noise_coefficient;
+  settings.normal_sigma_scale = options.confidence_sigma_scale;
   nf::NormalMap normals;
-  nf::depth::depthToNormals(depth, frame.K, settings, normals);
+  nf::depth::depthToNormals(depth, frame.K, settings, normals, confidence);
   return normals;
 }
 
@@ -84,11 +111,12 @@ std::vector<CaseResult> runTexturedCase(const Options& options,
     CaseRunner runner({"depth normals"}, options, timers);
     for (std::size_t s = 0; s < frames.size(); ++s) {
       const int id = kTexturedScenes[s];
-      const nf::NormalMap input =
-          cameraNormals(frames[s], camera, method,
-                        noiseSeed(options, id, kCameraStream, 0.0));
+      nf::ScalarMap confidence;
+      const nf::NormalMap input = cameraNormals(
+          options, frames[s], camera, method,
+          noiseSeed(options, id, kCameraStream, 0.0), &confidence);
       const std::vector<nf::NormalMap> regularized =
-          runner.addScene(sceneOf(id, frames[s], name, input));
+          runner.addScene(sceneOf(id, frames[s], name, input, &confidence));
       if (s == 0 && method == nf::depth::NormalMethod::kPlaneFit) {
         example->taken = true;
         example->tag = "textured_scene" + std::to_string(id);
@@ -101,11 +129,11 @@ std::vector<CaseResult> runTexturedCase(const Options& options,
         example->normals_panel = true;
       }
     }
-    results.push_back(
-        runner.finish("textured, " + methodName(method),
-                      "Textured scenes " + std::to_string(kTexturedScenes[0]) +
-                          ", " + std::to_string(kTexturedScenes[1]) + ": " +
-                          name + ", " + camera.name + " camera"));
+    results.push_back(finishWithConfidence(
+        runner, "textured, " + methodName(method),
+        "Textured scenes " + std::to_string(kTexturedScenes[0]) + ", " +
+            std::to_string(kTexturedScenes[1]) + ": " + name + ", " +
+            camera.name + " camera"));
     std::cerr << "evaluate: textured case, " << methodName(method) << " done\n";
   }
   return results;
@@ -122,21 +150,29 @@ std::vector<CaseResult> runCurvedCase(const Options& options, Timers* timers) {
     CaseRunner runner({"input"}, options, timers);
     for (std::size_t s = 0; s < frames.size(); ++s) {
       const int id = kCurvedScenes[s];
+      // Only the depth normals have a producer's confidence.
+      nf::ScalarMap confidence;
       const nf::NormalMap input =
           input_kind == 0
               ? syn::addPaperNoise(frames[s].normals_gt, options.curved_sigma,
                                    noiseSeed(options, id, kCurvedPaperStream,
                                              options.curved_sigma))
-              : cameraNormals(frames[s], camera,
+              : cameraNormals(options, frames[s], camera,
                               nf::depth::NormalMethod::kPlaneFit,
-                              noiseSeed(options, id, kCameraStream, 0.0));
-      runner.addScene(sceneOf(id, frames[s], name, input));
+                              noiseSeed(options, id, kCameraStream, 0.0),
+                              &confidence);
+      runner.addScene(sceneOf(id, frames[s], name, input,
+                              input_kind == 0 ? nullptr : &confidence));
     }
-    results.push_back(runner.finish(
-        "curved, " + std::string(input_kind == 0 ? "paper noise" : "depth"),
+    const std::string id =
+        "curved, " + std::string(input_kind == 0 ? "paper noise" : "depth");
+    const std::string title =
         "Curved objects (scenes " + std::to_string(kCurvedScenes[0]) + ", " +
-            std::to_string(kCurvedScenes[1]) + "): " + name +
-            (input_kind == 0 ? "" : ", " + camera.name + " camera")));
+        std::to_string(kCurvedScenes[1]) + "): " + name +
+        (input_kind == 0 ? "" : ", " + camera.name + " camera");
+    results.push_back(input_kind == 0
+                          ? runner.finish(id, title)
+                          : finishWithConfidence(runner, id, title));
     std::cerr << "evaluate: curved case, " << name << " done\n";
   }
   return results;
@@ -155,14 +191,15 @@ std::vector<CaseResult> runDepthCameraCase(
       CaseRunner runner({"depth normals"}, options, timers);
       for (std::size_t s = 0; s < frames.size(); ++s) {
         const int id = options.scenes[s];
-        const nf::NormalMap input =
-            cameraNormals(frames[s], camera, method,
-                          noiseSeed(options, id, kCameraStream, 0.0));
-        runner.addScene(sceneOf(id, frames[s], name, input));
+        nf::ScalarMap confidence;
+        const nf::NormalMap input = cameraNormals(
+            options, frames[s], camera, method,
+            noiseSeed(options, id, kCameraStream, 0.0), &confidence);
+        runner.addScene(sceneOf(id, frames[s], name, input, &confidence));
       }
       results.push_back(
-          runner.finish(camera.name + ", " + methodName(method),
-                        "Depth camera, " + camera.name + ": " + name));
+          finishWithConfidence(runner, camera.name + ", " + methodName(method),
+                               "Depth camera, " + camera.name + ": " + name));
       std::cerr << "evaluate: depth-camera case, " << camera.name << ", "
                 << methodName(method) << " done\n";
     }

@@ -94,6 +94,9 @@ struct Options {
   // Robot-like inputs.
   double curved_sigma = 0.3;       ///< paper noise of the curved case
   double stereo_baseline_m = 0.1;  ///< the rendered pair's baseline
+  /// s0 of the depth normals' confidence in the robot cases.
+  double confidence_sigma_scale =
+      nf::depth::DepthNormalSettings().normal_sigma_scale;
   std::string aloe_dir = nf::aloe::kDefaultDirectory;
   bool help = false;
 };
@@ -236,8 +239,11 @@ struct CaseResult {
   std::vector<int> scene_ids;  ///< scene ids (castle: frame numbers)
   std::vector<Row> rows;  ///< inputs, best of each filter, regularizer runs
   int num_inputs = 0;
-  int first_filter_row = 0;     ///< bilateral, then the peers
-  int regularizer_row = 0;      ///< the run the summary compares
+  int first_filter_row = 0;  ///< bilateral, then the peers
+  int regularizer_row = 0;   ///< the run the summary compares
+  /// The regularizer with the producer's confidence as its data weight (the
+  /// depth-derived robot cases), also in the summary; -1: none.
+  int confidence_row = -1;
   std::vector<Candidate> best;  ///< per family
   std::vector<Candidate> candidates;
   std::vector<SplitScore> candidate_means;
@@ -324,11 +330,27 @@ std::vector<CaseResult> runFusionCase(
 
 /// Normals of a simulated depth camera's depth, computed as a driver user
 /// does: depth::depthToNormals at its defaults, `method`, with the camera's
-/// noise coefficient.
-nf::NormalMap cameraNormals(const nf::synthetic::Frame& frame,
+/// noise coefficient; their confidence too (with s0 =
+/// options.confidence_sigma_scale) when `confidence` is given.
+nf::NormalMap cameraNormals(const Options& options,
+                            const nf::synthetic::Frame& frame,
                             const nf::synthetic::DepthCameraModel& camera,
-                            nf::depth::NormalMethod method, std::uint64_t seed);
+                            nf::depth::NormalMethod method, std::uint64_t seed,
+                            nf::ScalarMap* confidence = nullptr);
 std::string cameraText(const nf::synthetic::DepthCameraModel& camera);
+
+/// The row name of the regularizer run with the producer's confidence.
+extern const char* const kConfidenceRun;
+/// The two regularizer runs of a depth-derived input: plain (every pixel
+/// weight 1) and with `confidence` as the data weight.
+std::vector<std::pair<std::string, std::vector<nf::NormalInput>>>
+runsWithConfidence(const nf::NormalMap& normals,
+                   const nf::ScalarMap& confidence);
+/// CaseRunner::finish for a case whose scenes ran runsWithConfidence: the
+/// plain run stays the one the summary compares, the other is its
+/// confidence_row.
+CaseResult finishWithConfidence(CaseRunner& runner, const std::string& id,
+                                const std::string& title);
 
 /// The textured scenes: one case per depth-normal method; the example is
 /// the first scene with plane_fit.
@@ -463,6 +485,7 @@ const Row& bilateralRow(const CaseResult& r);
 std::string psnrTable(const std::vector<CaseResult>& results);
 std::string angleTable(const std::vector<CaseResult>& results);
 std::string caseTables(const CaseResult& r, const std::string& heading);
+/// The case's summary line; a second one for its confidence_row.
 std::string summaryLine(const CaseResult& r);
 void writeCsv(const std::string& path, const std::vector<CaseResult>& cases);
 /// Every filter setting's mean scores: the grids the best settings come from.

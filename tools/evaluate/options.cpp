@@ -204,6 +204,8 @@ bool applyCaseOption(const std::string& option, const ValueFn& value,
     setDouble(option, value(), 0.0, 10.0, &o->curved_sigma);
   } else if (option == "--stereo-baseline") {
     setDouble(option, value(), 0.01, 0.5, &o->stereo_baseline_m);
+  } else if (option == "--confidence-sigma-scale") {
+    setDouble(option, value(), 1e-6, 100.0, &o->confidence_sigma_scale);
   } else if (option == "--aloe-dir") {
     o->aloe_dir = value();
   } else {
@@ -309,6 +311,9 @@ void printUsage(std::ostream& out) {
       << o.curved_sigma << "]\n"
       << "  --stereo-baseline X   the rendered stereo pair's baseline, metres ["
       << o.stereo_baseline_m << "]\n"
+      << "  --confidence-sigma-scale X  s0 of the depth normals' confidence "
+         "in the\n                        robot cases (normal_sigma_scale) ["
+      << o.confidence_sigma_scale << "]\n"
       << "  --aloe-dir DIR        Middlebury Aloe (aloeL.jpg, aloeR.jpg, "
          "aloeGT.png)\n"
       << "                        [" << o.aloe_dir << "]\n"

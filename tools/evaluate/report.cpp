@@ -89,9 +89,9 @@ struct PeerVerdict {
   std::string best_peer;
 };
 
-PeerVerdict verdictOf(const CaseResult& r) {
+PeerVerdict verdictOf(const CaseResult& r, int regularizer_row) {
   PeerVerdict v;
-  const Score& reg = r.rows[r.regularizer_row].mean.valid;
+  const Score& reg = r.rows[regularizer_row].mean.valid;
   for (int f = 1; f < numFamilies(); ++f) {
     const Score& peer = r.rows[r.first_filter_row + f].mean.valid;
     if (peer.empty) continue;
@@ -201,15 +201,17 @@ std::string caseTables(const CaseResult& r, const std::string& heading) {
   return out.str();
 }
 
-std::string summaryLine(const CaseResult& r) {
-  const PeerVerdict v = verdictOf(r);
+namespace {
+
+std::string summaryLineOf(const CaseResult& r, int regularizer_row) {
+  const PeerVerdict v = verdictOf(r, regularizer_row);
   std::ostringstream out;
-  out << "| " << r.id << " | " << r.rows[r.regularizer_row].method << " | "
+  out << "| " << r.id << " | " << r.rows[regularizer_row].method << " | "
       << (v.ahead_psnr ? "yes" : "**no**") << " | "
       << (v.ahead_angle ? "yes" : "**no**") << " | "
       << signedFixed(v.margin_db, 2) << " | " << v.best_peer << " |";
   if (r.has_fill) {
-    const Score& reg = r.rows[r.regularizer_row].mean.fill;
+    const Score& reg = r.rows[regularizer_row].mean.fill;
     double best_fill = -std::numeric_limits<double>::infinity();
     for (int f = 1; f < numFamilies(); ++f) {
       best_fill =
@@ -220,6 +222,16 @@ std::string summaryLine(const CaseResult& r) {
     out << " - |";
   }
   return out.str();
+}
+
+}  // namespace
+
+std::string summaryLine(const CaseResult& r) {
+  std::string lines = summaryLineOf(r, r.regularizer_row);
+  if (r.confidence_row >= 0) {
+    lines += "\n" + summaryLineOf(r, r.confidence_row);
+  }
+  return lines;
 }
 
 void writeCsv(const std::string& path, const std::vector<CaseResult>& cases) {
