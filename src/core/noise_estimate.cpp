@@ -47,6 +47,19 @@ void windowSums(int W, int r, const float* __restrict in,
   }
 }
 
+void windowResultantRow(const PlanarImage& data, int r, int y,
+                        float* const col[4], float* const win[4]) {
+  const int W = data.width(), H = data.height();
+  const int y0 = std::max(0, y - r), y1 = std::min(H - 1, y + r);
+  for (int k = 0; k < 4; ++k) std::fill(col[k], col[k] + W, 0.0f);
+  for (int v = y0; v <= y1; ++v) {
+    const std::size_t off = static_cast<std::size_t>(v) * W;
+    columnSums(W, data.plane(0) + off, data.plane(1) + off, data.plane(2) + off,
+               col[0], col[1], col[2], col[3]);
+  }
+  for (int k = 0; k < 4; ++k) windowSums(W, r, col[k], win[k]);
+}
+
 namespace {
 
 /// One row of sigma_r from the window sums (resultant s, valid count n).
@@ -74,9 +87,6 @@ void whiteNoiseSpreadRow(int W, const float* __restrict sx,
 void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
                           int threads) {
   const int W = data.width(), H = data.height();
-  const float* fx = data.plane(0);
-  const float* fy = data.plane(1);
-  const float* fz = data.plane(2);
 #pragma omp parallel num_threads(threads)
   {
     // Per thread: column sums (col_*) and window sums (win_*) of f and of
@@ -91,16 +101,8 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
                      scratch.data() + 6 * W, scratch.data() + 7 * W};
 #pragma omp for schedule(static)
     for (int y = 0; y < H; ++y) {
-      const int y0 = std::max(0, y - r), y1 = std::min(H - 1, y + r);
-      // Resultant and count of the window: rows y0 .. y1 per column, then
-      // the columns x - r .. x + r.
-      for (int k = 0; k < 4; ++k) std::fill(col[k], col[k] + W, 0.0f);
-      for (int v = y0; v <= y1; ++v) {
-        const std::size_t off = static_cast<std::size_t>(v) * W;
-        columnSums(W, fx + off, fy + off, fz + off, col[0], col[1], col[2],
-                   col[3]);
-      }
-      for (int k = 0; k < 4; ++k) windowSums(W, r, col[k], win[k]);
+      // Resultant and count of the window around row y.
+      windowResultantRow(data, r, y, col, win);
       whiteNoiseSpreadRow(W, win[0], win[1], win[2], win[3],
                           out + static_cast<std::size_t>(y) * W);
     }

@@ -322,9 +322,6 @@ void applyLocalStatistics(const SolverSettings& settings,
   const float density_power = static_cast<float>(settings.density_power);
   const float eps_global = static_cast<float>(settings.data_eps);
   const float eps_local = static_cast<float>(settings.data_eps_local);
-  const float* fx = data.plane(0);
-  const float* fy = data.plane(1);
-  const float* fz = data.plane(2);
   float* delta = data_eps.plane(0);
   float* c = data_weight.plane(0);
   if (!huber && !density && mean_spread == nullptr) return;
@@ -346,21 +343,14 @@ void applyLocalStatistics(const SolverSettings& settings,
                      scratch.data() + 6 * W, scratch.data() + 7 * W};
 #pragma omp for schedule(static)
     for (int y = 0; y < H; ++y) {
-      const int y0 = std::max(0, y - r), y1 = std::min(H - 1, y + r);
       // Resultant of the valid f in the window (f = 0 where missing) and
-      // their count, separably: the rows y0 .. y1 summed per column ...
-      for (int k = 0; k < 4; ++k) std::fill(col[k], col[k] + W, 0.0f);
-      for (int v = y0; v <= y1; ++v) {
-        const std::size_t off = static_cast<std::size_t>(v) * W;
-        columnSums(W, fx + off, fy + off, fz + off, col[0], col[1], col[2],
-                   col[3]);
-      }
-      // ... then the columns x - r .. x + r.
-      for (int k = 0; k < 4; ++k) windowSums(W, r, col[k], win[k]);
+      // their count.
+      windowResultantRow(data, r, y, col, win);
+      const int window_rows = std::min(H - 1, y + r) - std::max(0, y - r) + 1;
       const std::size_t off = static_cast<std::size_t>(y) * W;
       // delta (written when the data terms use it) and the ratios.
       float* delta_row = huber ? delta + off : unused_delta;
-      localStatisticsRow(W, r, y1 - y0 + 1, eps_global, eps_local, win[0],
+      localStatisticsRow(W, r, window_rows, eps_global, eps_local, win[0],
                          win[1], win[2], win[3], c + off, delta_row, ratio,
                          spread);
       // The normalized window mean m and the spread s, before the density

@@ -22,6 +22,13 @@ void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
 void windowSums(int W, int r, const float* __restrict in,
                 float* __restrict out);
 
+/// Window sums of row y of f (3 planes, 0 where missing) over the
+/// (2 r + 1)^2 window, separably: the rows y - r .. y + r summed per column
+/// into col[0..3] (resultant x, y, z and the valid count), then the columns
+/// x - r .. x + r into win[0..3]. col and win: 4 rows of W values each.
+void windowResultantRow(const PlanarImage& data, int r, int y,
+                        float* const col[4], float* const win[4]);
+
 /// The noise level of each pixel of f (3 planes, unit or 0 where missing) in
 /// the (2 r + 1)^2 window around it, as white noise would read it:
 ///   sigma_r(x) = s_r(x) / sqrt(1 - 1 / n_r(x)),
