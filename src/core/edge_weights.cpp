@@ -179,31 +179,44 @@ void gradientMagnitudes(const ColorImage& image,
   }
 }
 
-/// The weight of each link from the gradient magnitudes in scratch.
-void linkWeights(const EdgeWeightSettings& settings,
-                 const internal::EdgeWeightScratch& scratch,
-                 PlanarImage& weights, int threads) {
-  const int W = weights.width(), H = weights.height();
+/// The weights of one row's links from their gradients, in place in w_h
+/// and w_v: w = max(w_min, exp(-alpha g^beta)) or max(w_min, 1 / (1 + alpha
+/// g^beta)); the common case (exponential, beta = 1) in float, vectorised.
+void weightsFromGradientRow(const EdgeWeightSettings& settings, int W,
+                            float* w_h, float* w_v) {
   const bool exponential =
       settings.function == EdgeWeightFunction::kExponential;
   const double alpha = settings.alpha, beta = settings.beta;
   const float w_min = static_cast<float>(settings.w_min);
+  if (exponential && beta == 1.0) {
+    const float minus_alpha = static_cast<float>(-alpha);
+    exponentialWeightRow(W, minus_alpha, w_min, w_h);
+    exponentialWeightRow(W, minus_alpha, w_min, w_v);
+    return;
+  }
   auto weight_of = [&](float g) {
     const double gb = beta == 1.0 ? g : std::pow(static_cast<double>(g), beta);
     const double w =
         exponential ? std::exp(-alpha * gb) : 1.0 / (1.0 + alpha * gb);
     return std::max(w_min, static_cast<float>(w));
   };
+  for (int x = 0; x < W; ++x) {
+    w_h[x] = weight_of(w_h[x]);
+    w_v[x] = weight_of(w_v[x]);
+  }
+}
+
+/// The weight of each link from the gradient magnitudes in scratch.
+void linkWeights(const EdgeWeightSettings& settings,
+                 const internal::EdgeWeightScratch& scratch,
+                 PlanarImage& weights, int threads) {
+  const int W = weights.width(), H = weights.height();
   const float* mag_h = scratch.mag_h.data();
   const float* mag_v = scratch.mag_v.data();
   // The difference n(x+1) - n(x) straddles two pixels: with Sobel gradients
   // (centred on pixels) use the stronger of the two; forward differences
   // already sit between them.
   const bool centred = settings.gradient == EdgeGradient::kSobel;
-  // The common case (exponential, beta = 1): w = max(w_min, exp(-alpha g))
-  // in float, row by row, vectorised.
-  const bool fast = exponential && beta == 1.0;
-  const float minus_alpha = static_cast<float>(-alpha);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     const std::size_t row = static_cast<std::size_t>(y) * W;
@@ -217,15 +230,7 @@ void linkWeights(const EdgeWeightSettings& settings,
       w_v[x] =
           centred && y + 1 < H ? std::max(mag_v[i], mag_v[i + W]) : mag_v[i];
     }
-    if (fast) {
-      exponentialWeightRow(W, minus_alpha, w_min, w_h);
-      exponentialWeightRow(W, minus_alpha, w_min, w_v);
-    } else {
-      for (int x = 0; x < W; ++x) {
-        w_h[x] = weight_of(w_h[x]);
-        w_v[x] = weight_of(w_v[x]);
-      }
-    }
+    weightsFromGradientRow(settings, W, w_h, w_v);
   }
 }
 
@@ -263,24 +268,13 @@ void forwardDifferenceRow(int W, int channels, const float* const* row,
 }
 
 /// computeEdgeWeightsInto() where fusable(): per row, the forward
-/// differences straight into the weight rows, then linkWeights()'s weight
-/// of each (the same values, without the gradient planes' passes).
+/// differences straight into the weight rows, then their weights
+/// (weightsFromGradientRow(), as linkWeights(); without the gradient
+/// planes' passes).
 void fusedForwardWeights(const ColorImage& image,
                          const EdgeWeightSettings& settings,
                          PlanarImage& weights, int threads) {
   const int W = image.width(), H = image.height(), C = image.channels();
-  const bool exponential =
-      settings.function == EdgeWeightFunction::kExponential;
-  const double alpha = settings.alpha, beta = settings.beta;
-  const float w_min = static_cast<float>(settings.w_min);
-  auto weight_of = [&](float g) {
-    const double gb = beta == 1.0 ? g : std::pow(static_cast<double>(g), beta);
-    const double w =
-        exponential ? std::exp(-alpha * gb) : 1.0 / (1.0 + alpha * gb);
-    return std::max(w_min, static_cast<float>(w));
-  };
-  const bool fast = exponential && beta == 1.0;
-  const float minus_alpha = static_cast<float>(-alpha);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
     const std::size_t row = static_cast<std::size_t>(y) * W;
@@ -295,15 +289,7 @@ void fusedForwardWeights(const ColorImage& image,
     float* w_h = weights.plane(0) + row;
     float* w_v = weights.plane(1) + row;
     forwardDifferenceRow(W, C, here, next, w_h, w_v);
-    if (fast) {
-      exponentialWeightRow(W, minus_alpha, w_min, w_h);
-      exponentialWeightRow(W, minus_alpha, w_min, w_v);
-    } else {
-      for (int x = 0; x < W; ++x) {
-        w_h[x] = weight_of(w_h[x]);
-        w_v[x] = weight_of(w_v[x]);
-      }
-    }
+    weightsFromGradientRow(settings, W, w_h, w_v);
   }
 }
 
