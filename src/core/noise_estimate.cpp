@@ -48,7 +48,9 @@ void windowSums(int W, int r, const float* __restrict in,
 }
 
 void windowResultantRow(const PlanarImage& data, int r, int y,
-                        float* const col[4], float* const win[4]) {
+                        WindowSumRows& rows) {
+  float* const* col = rows.col;
+  float* const* win = rows.win;
   const int W = data.width(), H = data.height();
   const int y0 = std::max(0, y - r), y1 = std::min(H - 1, y + r);
   for (int k = 0; k < 4; ++k) std::fill(col[k], col[k] + W, 0.0f);
@@ -92,18 +94,16 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
     // Per thread: column sums (col_*) and window sums (win_*) of f and of
     // the valid count; grown once, then reused.
     thread_local std::vector<float> scratch;
-    const std::size_t scratch_values = 8 * static_cast<std::size_t>(W);
+    const std::size_t scratch_values =
+        WindowSumRows::kRows * static_cast<std::size_t>(W);
     releaseIfOversized(scratch, scratch_values);
     if (scratch.size() < scratch_values) scratch.resize(scratch_values);
-    float* col[4] = {scratch.data(), scratch.data() + W, scratch.data() + 2 * W,
-                     scratch.data() + 3 * W};
-    float* win[4] = {scratch.data() + 4 * W, scratch.data() + 5 * W,
-                     scratch.data() + 6 * W, scratch.data() + 7 * W};
+    WindowSumRows rows(scratch.data(), W);
 #pragma omp for schedule(static)
     for (int y = 0; y < H; ++y) {
       // Resultant and count of the window around row y.
-      windowResultantRow(data, r, y, col, win);
-      whiteNoiseSpreadRow(W, win[0], win[1], win[2], win[3],
+      windowResultantRow(data, r, y, rows);
+      whiteNoiseSpreadRow(W, rows.win[0], rows.win[1], rows.win[2], rows.win[3],
                           out + static_cast<std::size_t>(y) * W);
     }
   }

@@ -331,21 +331,21 @@ void applyLocalStatistics(const SolverSettings& settings,
     // (col_*) and then along the row (win_*); grown once, then reused.
     // (Rows of a much wider image give their memory back.)
     thread_local std::vector<float> scratch;
-    const std::size_t scratch_values = 11 * static_cast<std::size_t>(W);
+    const int rows_values = WindowSumRows::kRows;
+    const std::size_t scratch_values =
+        (rows_values + 3) * static_cast<std::size_t>(W);
     releaseIfOversized(scratch, scratch_values);
     if (scratch.size() < scratch_values) scratch.resize(scratch_values);
-    float* ratio = scratch.data() + 8 * W;
-    float* unused_delta = scratch.data() + 9 * W;
-    float* spread = scratch.data() + 10 * W;
-    float* col[4] = {scratch.data(), scratch.data() + W, scratch.data() + 2 * W,
-                     scratch.data() + 3 * W};
-    float* win[4] = {scratch.data() + 4 * W, scratch.data() + 5 * W,
-                     scratch.data() + 6 * W, scratch.data() + 7 * W};
+    WindowSumRows rows(scratch.data(), W);
+    const float* const* win = rows.win;
+    float* ratio = scratch.data() + rows_values * W;
+    float* unused_delta = scratch.data() + (rows_values + 1) * W;
+    float* spread = scratch.data() + (rows_values + 2) * W;
 #pragma omp for schedule(static)
     for (int y = 0; y < H; ++y) {
       // Resultant of the valid f in the window (f = 0 where missing) and
       // their count.
-      windowResultantRow(data, r, y, col, win);
+      windowResultantRow(data, r, y, rows);
       const int window_rows = std::min(H - 1, y + r) - std::max(0, y - r) + 1;
       const std::size_t off = static_cast<std::size_t>(y) * W;
       // delta (written when the data terms use it) and the ratios.

@@ -22,12 +22,26 @@ void columnSums(int W, const float* __restrict fx, const float* __restrict fy,
 void windowSums(int W, int r, const float* __restrict in,
                 float* __restrict out);
 
+/// The rows windowResultantRow() works in: column sums col[0..3] and window
+/// sums win[0..3] (resultant x, y, z and the valid count), W values each.
+struct WindowSumRows {
+  /// The kRows rows laid out in the first kRows * W values of `scratch`.
+  WindowSumRows(float* scratch, int W) {
+    for (int k = 0; k < 4; ++k) {
+      col[k] = scratch + k * W;
+      win[k] = scratch + (4 + k) * W;
+    }
+  }
+  static constexpr int kRows = 8;
+  float* col[4];
+  float* win[4];
+};
+
 /// Window sums of row y of f (3 planes, 0 where missing) over the
 /// (2 r + 1)^2 window, separably: the rows y - r .. y + r summed per column
-/// into col[0..3] (resultant x, y, z and the valid count), then the columns
-/// x - r .. x + r into win[0..3]. col and win: 4 rows of W values each.
+/// into rows.col, then the columns x - r .. x + r into rows.win.
 void windowResultantRow(const PlanarImage& data, int r, int y,
-                        float* const col[4], float* const win[4]);
+                        WindowSumRows& rows);
 
 /// The noise level of each pixel of f (3 planes, unit or 0 where missing) in
 /// the (2 r + 1)^2 window around it, as white noise would read it:
