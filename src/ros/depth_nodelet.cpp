@@ -183,6 +183,14 @@ void scalarMapToMessage(const ScalarMap& values, const std_msgs::Header& header,
 }
 
 DepthToNormalsNodelet::~DepthToNormalsNodelet() {
+  // Unsubscribed first: shutdown() waits for a callback under way, so that
+  // none runs on the members destroyed after this body.
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    sub_depth_.shutdown();
+    sub_info_.shutdown();
+    sub_rgb_info_.shutdown();
+  }
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
     stop_ = true;

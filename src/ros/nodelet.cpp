@@ -113,6 +113,14 @@ void writeConfigMessage(const ParameterMap& params,
 }  // namespace
 
 NormalFusionNodelet::~NormalFusionNodelet() {
+  // Unsubscribed first: shutdown() waits for a callback under way, so that
+  // none runs on the members destroyed after this body.
+  timer_.stop();
+  {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    sub_image_.shutdown();
+    for (ros::Subscriber& sub : subs_) sub.shutdown();
+  }
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
     stop_ = true;
@@ -122,7 +130,6 @@ NormalFusionNodelet::~NormalFusionNodelet() {
   if (pipeline_) pipeline_->requestCancel();
   work_cv_.notify_all();
   if (worker_.joinable()) worker_.join();
-  timer_.stop();
 }
 
 void NormalFusionNodelet::onInit() {

@@ -133,10 +133,12 @@ class NodeClient {
 
  private:
   ros::Publisher image_, info_, normals_[2];
-  ros::Subscriber fused_sub_, vis_sub_, stats_sub_;
   std::mutex mutex_;
   std::map<ros::Time, sensor_msgs::ImageConstPtr> fused_, vis_;
   std::map<ros::Time, nf::FusionStatsConstPtr> stats_;
+  // Declared last so that they are destroyed first: a callback still arriving
+  // on the spinner's threads never finds the data it writes to destroyed.
+  ros::Subscriber fused_sub_, vis_sub_, stats_sub_;
 };
 
 /// Collects /rosout so that tests can check what the node logged.
@@ -165,9 +167,11 @@ class LogCollector {
   }
 
  private:
-  ros::Subscriber sub_;
   std::mutex mutex_;
   std::vector<rosgraph_msgs::Log> logs_;
+  // Declared last so that it is destroyed first: a callback still arriving
+  // on the spinner's threads never finds the data it writes to destroyed.
+  ros::Subscriber sub_;
 };
 
 inline std::string nodeName() {

@@ -133,10 +133,12 @@ class Client {
  private:
   ros::NodeHandle nh_;
   ros::Publisher depth_, info_;
-  ros::Subscriber normals_sub_, confidence_sub_, log_sub_;
   std::mutex mutex_;
   std::map<ros::Time, sensor_msgs::ImageConstPtr> normals_, confidence_;
   std::vector<rosgraph_msgs::Log> logs_;
+  // Declared last so that they are destroyed first: a callback still arriving
+  // on the spinner's threads never finds the data it writes to destroyed.
+  ros::Subscriber normals_sub_, confidence_sub_, log_sub_;
 };
 
 const nf::synthetic::Frame& scene() {

@@ -176,11 +176,13 @@ class Client {
  private:
   ros::NodeHandle nh_;
   ros::Publisher depth_, info_, rgb_info_;
-  ros::Subscriber normals_sub_, log_sub_;
   std::mutex mutex_;
   std::map<ros::Time, sensor_msgs::ImageConstPtr> normals_;
   std::vector<std::string> errors_;
   double next_stamp_ = 300.0;
+  // Declared last so that they are destroyed first: a callback still arriving
+  // on the spinner's threads never finds the data it writes to destroyed.
+  ros::Subscriber normals_sub_, log_sub_;
 };
 
 void broadcastTransform(tf2_ros::StaticTransformBroadcaster& broadcaster) {

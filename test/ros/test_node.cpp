@@ -227,9 +227,11 @@ class DiagnosticsCollector {
   }
 
  private:
-  ros::Subscriber sub_;
   std::mutex mutex_;
   std::map<std::string, diagnostic_msgs::DiagnosticStatus> latest_;
+  // Declared last so that it is destroyed first: a callback still arriving
+  // on the spinner's threads never finds the data it writes to destroyed.
+  ros::Subscriber sub_;
 };
 
 std::string valueOf(const diagnostic_msgs::DiagnosticStatus& s,
