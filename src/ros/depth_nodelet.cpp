@@ -187,9 +187,7 @@ DepthToNormalsNodelet::~DepthToNormalsNodelet() {
   // none runs on the members destroyed after this body.
   {
     std::lock_guard<std::mutex> lock(connect_mutex_);
-    sub_depth_.shutdown();
-    sub_info_.shutdown();
-    sub_rgb_info_.shutdown();
+    shutdownInputs();
   }
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
@@ -248,15 +246,19 @@ void DepthToNormalsNodelet::onInit() {
       settings_.register_to_rgb ? topic_names_[kRgbCameraInfo].c_str() : "");
 }
 
+void DepthToNormalsNodelet::shutdownInputs() {
+  sub_depth_.shutdown();
+  sub_info_.shutdown();
+  sub_rgb_info_.shutdown();
+}
+
 void DepthToNormalsNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
   const bool wanted = pub_normals_.getNumSubscribers() > 0 ||
                       pub_confidence_.getNumSubscribers() > 0 ||
                       pub_depth_registered_.getNumSubscribers() > 0;
   if (!wanted && subscribed_) {
-    sub_depth_.shutdown();
-    sub_info_.shutdown();
-    sub_rgb_info_.shutdown();
+    shutdownInputs();
     subscribed_ = false;
     std::lock_guard<std::mutex> sync_lock(sync_mutex_);
     sync_->reset();

@@ -118,8 +118,7 @@ NormalFusionNodelet::~NormalFusionNodelet() {
   timer_.stop();
   {
     std::lock_guard<std::mutex> lock(connect_mutex_);
-    sub_image_.shutdown();
-    for (ros::Subscriber& sub : subs_) sub.shutdown();
+    shutdownInputs();
   }
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
@@ -249,15 +248,19 @@ NormalFusionNodelet::Synchronizer::Options NormalFusionNodelet::syncOptions(
   return options;
 }
 
+void NormalFusionNodelet::shutdownInputs() {
+  sub_image_.shutdown();
+  for (ros::Subscriber& sub : subs_) sub.shutdown();
+  subs_.clear();
+}
+
 void NormalFusionNodelet::connectCb() {
   std::lock_guard<std::mutex> lock(connect_mutex_);
   const bool wanted = pub_fused_.getNumSubscribers() > 0 ||
                       pub_vis_.getNumSubscribers() > 0 ||
                       pub_stats_.getNumSubscribers() > 0;
   if (!wanted && subscribed_) {
-    sub_image_.shutdown();
-    for (ros::Subscriber& sub : subs_) sub.shutdown();
-    subs_.clear();
+    shutdownInputs();
     subscribed_ = false;
     updateTfListener();
     std::lock_guard<std::mutex> sync_lock(sync_mutex_);

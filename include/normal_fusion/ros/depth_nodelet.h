@@ -83,6 +83,8 @@ class DepthToNormalsNodelet : public nodelet::Nodelet {
 
   void onInit() override;
   void connectCb();
+  /// Ends the input subscriptions; the caller holds connect_mutex_.
+  void shutdownInputs();
   void onMessage(int topic, const std_msgs::Header& header,
                  const QueuedMessage& message);
   void handleMessage(int topic, const std_msgs::Header& header,

@@ -48,6 +48,8 @@ class NormalFusionNodelet : public nodelet::Nodelet {
 
   // Subscriptions only while some output has a subscriber.
   void connectCb();
+  /// Ends the input subscriptions; the caller holds connect_mutex_.
+  void shutdownInputs();
   void updateTfListener();
   // Every input callback ends here: checks, queues, forms sets.
   void onMessage(int topic, const std_msgs::Header& header,
