@@ -122,6 +122,11 @@ struct SolverSettings {
   /// g^-noise_weight_power. Fixed before the solve. 0 = off.
   int noise_radius = settings_default::noise_radius;
   double noise_weight_power = settings_default::noise_weight_power;
+  /// The noise estimate's spreads read around each window's least-squares
+  /// plane of the normals (f as an affine function of the pixel offset)
+  /// rather than around their mean: a curved surface's steady turn is not
+  /// counted as noise, so its gain stays near 1. false = around the mean.
+  bool noise_plane_residual = settings_default::noise_plane_residual;
   /// Edge weights of the links between two pixels that no input observes are
   /// multiplied by this, in (0, 1] (1 = off): a pixel next to an
   /// observed surface and inside a hole (a dropout, a silhouette's rim)

@@ -109,8 +109,134 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
   }
 }
 
+namespace {
+
+/// out(x) = sum over d = -r .. r inside the row of d^p in(x + d), p = 1, 2:
+/// the horizontal moments of the plane fit (p = 0 is windowSums()).
+NF_MULTIVERSION
+void weightedWindowSums(int W, int r, int p, const float* __restrict in,
+                        float* __restrict out) {
+  std::fill(out, out + W, 0.0f);
+  for (int d = -r; d <= r; ++d) {
+    if (d == 0) continue;
+    const float weight = p == 1 ? static_cast<float>(d)
+                                : static_cast<float>(d) * static_cast<float>(d);
+    const int lo = std::max(0, -d), hi = std::min(W, W - d);
+    for (int x = lo; x < hi; ++x) out[x] += weight * in[x + d];
+  }
+}
+
+/// sigma_r(x) around the window's least-squares plane: each component of f
+/// fitted as a + b u + c v over the valid pixels at offsets (u, v); the
+/// residual RSS = sum |f|^2 - sum_c b_c^T A^-1 b_c (A the moments of the
+/// mask, b_c those of f_c) read as white noise, sqrt(RSS / (n - 3)). Where
+/// the valid pixels are too few or on one line, the mean model's value.
+void planeResidualSpreadRow(int W, const float* const* m, float* sigma) {
+  const float* n0 = m[0];
+  const float *su = m[1], *sv = m[2], *suu = m[3], *suv = m[4], *svv = m[5];
+  for (int x = 0; x < W; ++x) {
+    const double n = n0[x];
+    if (n < 2.0) {
+      sigma[x] = -1.0f;
+      continue;
+    }
+    // Moments about the valid pixels' centroid (mu, mv).
+    const double mu = su[x] / n, mv = sv[x] / n;
+    const double cuu = suu[x] - su[x] * mu, cvv = svv[x] - sv[x] * mv;
+    const double cuv = suv[x] - su[x] * mv;
+    const double det = cuu * cvv - cuv * cuv;
+    const bool plane = n >= 4.0 && det > 1e-6 * std::max(1.0, cuu * cvv);
+    double rss_mean = n, rss_plane = n;  // sum |f|^2 = n (unit normals)
+    for (int c = 0; c < 3; ++c) {
+      const double f = m[6 + c][x], fu = m[9 + c][x], fv = m[12 + c][x];
+      rss_mean -= f * f / n;
+      // Covariances of f_c with u and v about the centroid; the plane's
+      // share of the sum of squares is g^T C^-1 g.
+      const double gu = fu - f * mu, gv = fv - f * mv;
+      if (plane) {
+        rss_plane -=
+            f * f / n +
+            (cvv * gu * gu - 2.0 * cuv * gu * gv + cuu * gv * gv) / det;
+      }
+    }
+    const double rss = std::max(0.0, plane ? rss_plane : rss_mean);
+    // E RSS = sigma^2 (n - k) for k fitted coefficients per component; the
+    // estimate's median is what is read, and the median of a chi with few
+    // degrees of freedom (2 (n - k): two tangent axes) lies below its
+    // root-mean-square by (1 - 2 / (9 dof))^(3/2) (Wilson-Hilferty).
+    const double dof_per_axis = n - (plane ? 3.0 : 1.0);
+    const double median_bias = std::pow(1.0 - 1.0 / (9.0 * dof_per_axis), 1.5);
+    sigma[x] = static_cast<float>(std::sqrt(rss / dof_per_axis) / median_bias);
+  }
+}
+
+}  // namespace
+
+void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
+                             int threads) {
+  const int W = data.width(), H = data.height();
+  // Column rows: mask moments 1, v, v^2 and f_c times 1, v (9); window rows:
+  // n, Su, Sv, Suu, Suv, Svv, F_c, Fu_c, Fv_c (15).
+  constexpr int kColumnRows = 9, kWindowRows = 15;
+#pragma omp parallel num_threads(threads)
+  {
+    thread_local std::vector<float> scratch;
+    const std::size_t scratch_values =
+        static_cast<std::size_t>(kColumnRows + kWindowRows) * W;
+    releaseIfOversized(scratch, scratch_values);
+    if (scratch.size() < scratch_values) scratch.resize(scratch_values);
+    float* col[kColumnRows];
+    float* win[kWindowRows];
+    for (int k = 0; k < kColumnRows; ++k) col[k] = scratch.data() + k * W;
+    for (int k = 0; k < kWindowRows; ++k) {
+      win[k] = scratch.data() + (kColumnRows + k) * W;
+    }
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; ++y) {
+      // Vertical pass: column moments over rows y - r .. y + r, v = row - y.
+      for (int k = 0; k < kColumnRows; ++k) {
+        std::fill(col[k], col[k] + W, 0.0f);
+      }
+      for (int row = std::max(0, y - r); row <= std::min(H - 1, y + r); ++row) {
+        const float v = static_cast<float>(row - y);
+        const std::size_t off = static_cast<std::size_t>(row) * W;
+        const float* fx = data.plane(0) + off;
+        const float* fy = data.plane(1) + off;
+        const float* fz = data.plane(2) + off;
+        for (int x = 0; x < W; ++x) {
+          const float valid =
+              fx[x] * fx[x] + fy[x] * fy[x] + fz[x] * fz[x] > 0.0f ? 1.0f
+                                                                   : 0.0f;
+          col[0][x] += valid;
+          col[1][x] += v * valid;
+          col[2][x] += v * v * valid;
+          col[3][x] += fx[x];
+          col[4][x] += fy[x];
+          col[5][x] += fz[x];
+          col[6][x] += v * fx[x];
+          col[7][x] += v * fy[x];
+          col[8][x] += v * fz[x];
+        }
+      }
+      // Horizontal pass, u = column - x.
+      windowSums(W, r, col[0], win[0]);             // n
+      weightedWindowSums(W, r, 1, col[0], win[1]);  // Su
+      windowSums(W, r, col[1], win[2]);             // Sv
+      weightedWindowSums(W, r, 2, col[0], win[3]);  // Suu
+      weightedWindowSums(W, r, 1, col[1], win[4]);  // Suv
+      windowSums(W, r, col[2], win[5]);             // Svv
+      for (int c = 0; c < 3; ++c) {
+        windowSums(W, r, col[3 + c], win[6 + c]);             // F_c
+        weightedWindowSums(W, r, 1, col[3 + c], win[9 + c]);  // Fu_c
+        windowSums(W, r, col[6 + c], win[12 + c]);            // Fv_c
+      }
+      planeResidualSpreadRow(W, win, out + static_cast<std::size_t>(y) * W);
+    }
+  }
+}
+
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
-                            int max_radius, int threads) {
+                            int max_radius, int threads, bool plane_residual) {
   NoiseEstimate estimate;
   const std::size_t pixels = data.pixelCount();
   // The spreads of one radius and the ones of the counted pixels (grown
@@ -124,7 +250,11 @@ NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
   samples.reserve(pixels);
   for (int r = base_radius; estimate.scales < kMaxNoiseScales;) {
     float* out = estimate.scales == 0 ? base_spread.data() : spread.data();
-    whiteNoiseSpreadInto(data, r, out, threads);
+    if (plane_residual) {
+      planeResidualSpreadInto(data, r, out, threads);
+    } else {
+      whiteNoiseSpreadInto(data, r, out, threads);
+    }
     // Median over the pixels with 2 samples at the base radius (the wider
     // windows hold them too), so that every scale counts the same pixels.
     samples.clear();

@@ -147,7 +147,8 @@ void applyNoiseGain(const SolverSettings& settings, const PlanarImage& data,
                     PlanarImage& data_eps, PlanarImage& data_weight,
                     PlanarImage* mean_spread, int threads) {
   const float gain =
-      estimateNoise(data, settings.local_radius, settings.noise_radius, threads)
+      estimateNoise(data, settings.local_radius, settings.noise_radius, threads,
+                    settings.noise_plane_residual)
           .gain;
   SolverSettings scaled = settings;
   scaled.data_eps_local *= gain;

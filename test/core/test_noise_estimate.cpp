@@ -117,5 +117,103 @@ TEST(NoiseEstimate, ThresholdAndWeightFollowTheGainOnlyWhenOn) {
   EXPECT_GT(white.data_weight[0].at(0, 30, 40), 0.5f / 1.1f);
 }
 
+/// A cylinder of radius `radius` pixels with its axis along y (normals
+/// turning with x, facing -z at the centre column), tilted by white noise of
+/// RMS `sigma` per tangent axis.
+PlanarImage noisyCylinder(int W, int H, double radius, double sigma,
+                          unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  PlanarImage f(W, H, 3);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const double s = (x - 0.5 * (W - 1)) / radius;
+      const double n[3] = {s, 0.0, -std::sqrt(1.0 - s * s)};
+      // Tangent axes: along the turn and along the axis.
+      const double t1[3] = {-n[2], 0.0, n[0]};
+      const double a = gauss(rng), b = gauss(rng);
+      const double v[3] = {n[0] + a * t1[0], b, n[2] + a * t1[2]};
+      const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      for (int c = 0; c < 3; ++c) {
+        f.at(c, y, x) = static_cast<float>(v[c] / len);
+      }
+    }
+  }
+  return f;
+}
+
+TEST(NoiseEstimate, PlaneResidualDoesNotReadABendAsNoise) {
+  // A 17 x 17 window spans 17 / 80 rad of the turn, about twice the noise's
+  // spread about the window mean; about a plane the turn is gone.
+  const PlanarImage f = noisyCylinder(120, 90, 80.0, 0.02, 6);
+  const internal::NoiseEstimate mean = internal::estimateNoise(f, 1, 8, 1);
+  const internal::NoiseEstimate plane =
+      internal::estimateNoise(f, 1, 8, 1, true);
+  EXPECT_GT(mean.gain, 1.5f);
+  EXPECT_LT(plane.gain, 1.1f);
+  // The base window reads the noise itself under both models.
+  EXPECT_NEAR(plane.sigma[0], 0.02f * std::sqrt(2.0f), 0.003f);
+  EXPECT_NEAR(mean.sigma[0], 0.02f * std::sqrt(2.0f), 0.003f);
+}
+
+TEST(NoiseEstimate, PlaneResidualKeepsWhiteAndSharedNoise) {
+  const internal::NoiseEstimate white =
+      internal::estimateNoise(noiseField(120, 90, 1, 0.1, 1), 1, 8, 1, true);
+  ASSERT_EQ(white.scales, 4);
+  for (int k = 0; k < white.scales; ++k) {
+    EXPECT_NEAR(white.sigma[k], 0.1f * std::sqrt(2.0f), 0.006f)
+        << "scale " << k;
+  }
+  EXPECT_LT(white.gain, 1.1f);
+  const internal::NoiseEstimate shared =
+      internal::estimateNoise(noiseField(120, 90, 5, 0.1, 2), 1, 8, 1, true);
+  EXPECT_GT(shared.gain, 1.4f);
+  EXPECT_LE(shared.gain, 17.0f / 3.0f);
+}
+
+TEST(NoiseEstimate, PlaneResidualOfAPlaneIsZeroAndHolesAreRead) {
+  // Noise-free tilted normals are their own plane: every spread 0 where
+  // the plane is determined, even with a column of holes through it.
+  PlanarImage f = noisyCylinder(40, 30, 80.0, 0.0, 7);
+  for (int y = 0; y < 30; ++y) {
+    for (int c = 0; c < 3; ++c) f.at(c, y, 20) = 0.0f;
+  }
+  std::vector<float> spread(f.pixelCount());
+  internal::planeResidualSpreadInto(f, 2, spread.data(), 1);
+  for (int y : {0, 15, 29}) {
+    for (int x : {0, 19, 21, 39}) {
+      EXPECT_LT(spread[y * 40 + x], 2e-3f) << x << ", " << y;
+    }
+  }
+  // A pixel whose window holds a single valid pixel reads no spread.
+  PlanarImage lone(9, 9, 3);
+  lone.at(2, 4, 4) = -1.0f;
+  std::vector<float> lone_spread(lone.pixelCount());
+  internal::planeResidualSpreadInto(lone, 1, lone_spread.data(), 1);
+  EXPECT_EQ(lone_spread[4 * 9 + 4], -1.0f);
+}
+
+TEST(NoiseEstimate, SettingSelectsThePlaneResidual) {
+  const int W = 120, H = 90;
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(W, H, &gt);
+  NormalInput cylinder;
+  cylinder.normals = noisyCylinder(W, H, 80.0, 0.02, 8);
+  problem.inputs = {cylinder};
+  SolverSettings settings;
+  settings.noise_radius = 8;
+  settings.noise_weight_power = 1.0;
+  const internal::PreparedLevel mean =
+      internal::prepareFinest(problem, settings);
+  settings.noise_plane_residual = true;
+  const internal::PreparedLevel plane =
+      internal::prepareFinest(problem, settings);
+  // The mean model divides the weight by its gain (> 1.5), the plane model
+  // by about 1.
+  EXPECT_LT(mean.data_weight[0].at(0, 45, 60),
+            plane.data_weight[0].at(0, 45, 60) / 1.4f);
+  EXPECT_GT(plane.data_weight[0].at(0, 45, 60), 0.5f / 1.1f);
+}
+
 }  // namespace
 }  // namespace normal_fusion

@@ -46,7 +46,8 @@ std::string settingsText(const nf::SolverSettings& s) {
   if (s.time_budget_ms > 0.0) out << ", budget " << s.time_budget_ms << " ms";
   if (s.noise_radius > s.local_radius) {
     out << ", noise radius " << s.noise_radius << ", noise weight power "
-        << s.noise_weight_power;
+        << s.noise_weight_power
+        << (s.noise_plane_residual ? ", about a plane" : "");
   }
   out << ", backend " << nf::toString(s.backend);
   return out.str();

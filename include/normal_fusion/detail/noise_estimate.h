@@ -52,6 +52,16 @@ void windowResultantRow(const PlanarImage& data, int r, int y,
 void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
                           int threads);
 
+/// As whiteNoiseSpreadInto() around the window's least-squares plane of f
+/// (each component fitted as a + b u + c v over the valid pixels at offsets
+/// (u, v) from x) instead of its mean:
+///   sigma_r(x) = sqrt(RSS_r(x) / (n_r(x) - 3)),
+/// so that a surface turning steadily (a cylinder, a sphere) reads its noise
+/// and not its bend; the mean model's value where fewer than 4 valid pixels
+/// or only pixels on one line leave the plane undetermined.
+void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
+                             int threads);
+
 /// The most scales of a NoiseEstimate (radii r0, 2 r0, 4 r0, ...).
 constexpr int kMaxNoiseScales = 8;
 
@@ -69,10 +79,12 @@ struct NoiseEstimate {
 };
 
 /// The estimate of f at radii base_radius, 2 base_radius, 4 base_radius, ...
-/// up to max_radius (max_radius itself the last one). Buffers grown once per
-/// thread, then reused.
+/// up to max_radius (max_radius itself the last one), each spread around
+/// the window's mean or, with plane_residual, around its least-squares plane
+/// (planeResidualSpreadInto()). Buffers grown once per thread, then reused.
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
-                            int max_radius, int threads);
+                            int max_radius, int threads,
+                            bool plane_residual = false);
 
 }  // namespace internal
 }  // namespace normal_fusion
