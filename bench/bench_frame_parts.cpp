@@ -22,6 +22,7 @@
 
 #include "bench_util.h"
 #include "eval/synthetic.h"
+#include "normal_fusion/detail/noise_estimate.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
 #include "normal_fusion/stream_fuser.h"
@@ -106,6 +107,8 @@ class PartsRun {
       {"warm start: active set", {}, {}},
       {"warm start: fill of the unknown pixels", {}, {}},
       {"refinement: gather + energy", {}, {}},
+      {"noise estimate of both inputs, mean model, radius 4", {}, {}},
+      {"noise estimate of both inputs, plane model, radius 4", {}, {}},
       {"live frame (StreamFuser::fuse, budget 33 ms)", {}, {}},
   };
   nf::SolverSettings settings_;
@@ -232,6 +235,16 @@ void PartsRun::frame(const nf::FusionProblem& problem,
         gathered.gather(level, iteration, active, threads);
         gathered.energy(settings_.huber_eps, settings_.penalty, threads);
       });
+  for (const bool plane : {false, true}) {
+    time(
+        plane ? 11 : 10, [] {},
+        [&] {
+          for (int l = 0; l < level.num_inputs; ++l) {
+            in::estimateNoise(level.data[l], settings_.local_radius, 4, threads,
+                              plane);
+          }
+        });
+  }
 }
 
 void PartsRun::run() {

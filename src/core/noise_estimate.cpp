@@ -126,48 +126,58 @@ void weightedWindowSums(int W, int r, int p, const float* __restrict in,
   }
 }
 
-/// sigma_r(x) around the window's least-squares plane: each component of f
-/// fitted as a + b u + c v over the valid pixels at offsets (u, v); the
-/// residual RSS = sum |f|^2 - sum_c b_c^T A^-1 b_c (A the moments of the
-/// mask, b_c those of f_c) read as white noise, sqrt(RSS / (n - 3)). Where
-/// the valid pixels are too few or on one line, the mean model's value.
-void planeResidualSpreadRow(int W, const float* const* m, float* sigma) {
-  const float* n0 = m[0];
-  const float *su = m[1], *sv = m[2], *suu = m[3], *suv = m[4], *svv = m[5];
-  for (int x = 0; x < W; ++x) {
-    const double n = n0[x];
-    if (n < 2.0) {
-      sigma[x] = -1.0f;
-      continue;
+/// sigma_r around the window's least-squares plane from its moments m =
+/// (n, Su, Sv, Suu, Suv, Svv, F_c, Fu_c, Fv_c): each component of f fitted as
+/// a + b u + c v over the valid pixels at offsets (u, v); the residual RSS =
+/// sum |f|^2 - sum_c b_c^T A^-1 b_c (A the moments of the mask, b_c those of
+/// f_c) read as white noise. Where the valid pixels are too few or on one
+/// line, the mean model's value; -1 below 2 samples.
+template <typename Moment>
+float planeModelSigma(const Moment& m) {
+  const double n = m(0);
+  if (n < 2.0) return -1.0f;
+  // Moments about the valid pixels' centroid (mu, mv).
+  const double mu = m(1) / n, mv = m(2) / n;
+  const double cuu = m(3) - m(1) * mu, cvv = m(5) - m(2) * mv;
+  const double cuv = m(4) - m(1) * mv;
+  const double det = cuu * cvv - cuv * cuv;
+  const bool plane = n >= 4.0 && det > 1e-6 * std::max(1.0, cuu * cvv);
+  double rss_mean = n, rss_plane = n;  // sum |f|^2 = n (unit normals)
+  for (int c = 0; c < 3; ++c) {
+    const double f = m(6 + c), fu = m(9 + c), fv = m(12 + c);
+    rss_mean -= f * f / n;
+    // Covariances of f_c with u and v about the centroid; the plane's share
+    // of the sum of squares is g^T C^-1 g.
+    const double gu = fu - f * mu, gv = fv - f * mv;
+    if (plane) {
+      rss_plane -= f * f / n +
+                   (cvv * gu * gu - 2.0 * cuv * gu * gv + cuu * gv * gv) / det;
     }
-    // Moments about the valid pixels' centroid (mu, mv).
-    const double mu = su[x] / n, mv = sv[x] / n;
-    const double cuu = suu[x] - su[x] * mu, cvv = svv[x] - sv[x] * mv;
-    const double cuv = suv[x] - su[x] * mv;
-    const double det = cuu * cvv - cuv * cuv;
-    const bool plane = n >= 4.0 && det > 1e-6 * std::max(1.0, cuu * cvv);
-    double rss_mean = n, rss_plane = n;  // sum |f|^2 = n (unit normals)
-    for (int c = 0; c < 3; ++c) {
-      const double f = m[6 + c][x], fu = m[9 + c][x], fv = m[12 + c][x];
-      rss_mean -= f * f / n;
-      // Covariances of f_c with u and v about the centroid; the plane's
-      // share of the sum of squares is g^T C^-1 g.
-      const double gu = fu - f * mu, gv = fv - f * mv;
-      if (plane) {
-        rss_plane -=
-            f * f / n +
-            (cvv * gu * gu - 2.0 * cuv * gu * gv + cuu * gv * gv) / det;
-      }
-    }
-    const double rss = std::max(0.0, plane ? rss_plane : rss_mean);
-    // E RSS = sigma^2 (n - k) for k fitted coefficients per component; the
-    // estimate's median is what is read, and the median of a chi with few
-    // degrees of freedom (2 (n - k): two tangent axes) lies below its
-    // root-mean-square by (1 - 2 / (9 dof))^(3/2) (Wilson-Hilferty).
-    const double dof_per_axis = n - (plane ? 3.0 : 1.0);
-    const double median_bias = std::pow(1.0 - 1.0 / (9.0 * dof_per_axis), 1.5);
-    sigma[x] = static_cast<float>(std::sqrt(rss / dof_per_axis) / median_bias);
   }
+  const double rss = std::max(0.0, plane ? rss_plane : rss_mean);
+  // E RSS = sigma^2 (n - k) for k fitted coefficients per component; the
+  // estimate's median is what is read, and the median of a chi with few
+  // degrees of freedom (2 (n - k): two tangent axes) lies below its
+  // root-mean-square by (1 - 2 / (9 dof))^(3/2) (Wilson-Hilferty).
+  const double dof_per_axis = n - (plane ? 3.0 : 1.0);
+  const double median_bias = std::pow(1.0 - 1.0 / (9.0 * dof_per_axis), 1.5);
+  return static_cast<float>(std::sqrt(rss / dof_per_axis) / median_bias);
+}
+
+/// One row of planeModelSigma() from the window rows m[0..14].
+void planeResidualSpreadRow(int W, const float* const* m, float* sigma) {
+  for (int x = 0; x < W; ++x) {
+    sigma[x] = planeModelSigma([&](int k) { return double{m[k][x]}; });
+  }
+}
+
+/// The white-noise reading of the window mean's spread (whiteNoiseSpreadRow
+/// for one pixel, in double).
+float meanModelSigma(double n, double sx, double sy, double sz) {
+  if (n < 2.0) return -1.0f;
+  const double R = std::sqrt(sx * sx + sy * sy + sz * sz) / n;
+  const double s2 = std::max(0.0, 2.0 * (1.0 - R));
+  return static_cast<float>(std::sqrt(s2 / std::max(1.0 - 1.0 / n, 0.5)));
 }
 
 }  // namespace
@@ -235,30 +245,76 @@ void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
   }
 }
 
+float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
+                     bool plane_residual) {
+  const int W = data.width(), H = data.height();
+  // The window's moments (see planeModelSigma), offsets from (x, y).
+  std::array<double, 15> m{};
+  for (int row = std::max(0, y - r); row <= std::min(H - 1, y + r); ++row) {
+    const double v = row - y;
+    const std::size_t off = static_cast<std::size_t>(row) * W;
+    for (int col = std::max(0, x - r); col <= std::min(W - 1, x + r); ++col) {
+      const double f[3] = {data.plane(0)[off + col], data.plane(1)[off + col],
+                           data.plane(2)[off + col]};
+      if (!(f[0] * f[0] + f[1] * f[1] + f[2] * f[2] > 0.0)) continue;
+      const double u = col - x;
+      m[0] += 1.0;
+      m[1] += u;
+      m[2] += v;
+      m[3] += u * u;
+      m[4] += u * v;
+      m[5] += v * v;
+      for (int c = 0; c < 3; ++c) {
+        m[6 + c] += f[c];
+        m[9 + c] += u * f[c];
+        m[12 + c] += v * f[c];
+      }
+    }
+  }
+  return plane_residual ? planeModelSigma([&](int k) { return m[k]; })
+                        : meanModelSigma(m[0], m[6], m[7], m[8]);
+}
+
+int noiseSampleStride(int width, int height) {
+  const double pixels = static_cast<double>(width) * height;
+  return std::max(1, static_cast<int>(std::sqrt(pixels / kNoiseSamples)));
+}
+
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
                             int max_radius, int threads, bool plane_residual) {
   NoiseEstimate estimate;
-  const std::size_t pixels = data.pixelCount();
-  // The spreads of one radius and the ones of the counted pixels (grown
+  const int W = data.width(), H = data.height();
+  // The windows around a grid of centres: the median of a few thousand reads
+  // the image's as well as that of every pixel (its relative error about
+  // 1.25 / sqrt(samples) of the windows' spread), at a small share of the
+  // cost.
+  const int stride = noiseSampleStride(W, H);
+  const int cols = (W + stride - 1 - stride / 2) / stride;
+  const int rows = (H + stride - 1 - stride / 2) / stride;
+  const std::size_t centres = static_cast<std::size_t>(cols) * rows;
+  // The spreads of one radius and the ones of the counted centres (grown
   // once, then reused).
   thread_local std::vector<float> spread, base_spread, samples;
-  releaseIfOversized(spread, pixels);
-  releaseIfOversized(base_spread, pixels);
-  releaseIfOversized(samples, pixels);
-  spread.resize(pixels);
-  base_spread.resize(pixels);
-  samples.reserve(pixels);
+  releaseIfOversized(spread, centres);
+  releaseIfOversized(base_spread, centres);
+  releaseIfOversized(samples, centres);
+  spread.resize(centres);
+  base_spread.resize(centres);
+  samples.reserve(centres);
   for (int r = base_radius; estimate.scales < kMaxNoiseScales;) {
     float* out = estimate.scales == 0 ? base_spread.data() : spread.data();
-    if (plane_residual) {
-      planeResidualSpreadInto(data, r, out, threads);
-    } else {
-      whiteNoiseSpreadInto(data, r, out, threads);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int j = 0; j < rows; ++j) {
+      for (int i = 0; i < cols; ++i) {
+        out[static_cast<std::size_t>(j) * cols + i] =
+            windowSpreadAt(data, r, stride / 2 + i * stride,
+                           stride / 2 + j * stride, plane_residual);
+      }
     }
-    // Median over the pixels with 2 samples at the base radius (the wider
-    // windows hold them too), so that every scale counts the same pixels.
+    // Median over the centres with 2 samples at the base radius (the wider
+    // windows hold them too), so that every scale counts the same centres.
     samples.clear();
-    for (std::size_t i = 0; i < pixels; ++i) {
+    for (std::size_t i = 0; i < centres; ++i) {
       if (base_spread[i] >= 0.0f) samples.push_back(out[i]);
     }
     if (samples.empty()) return NoiseEstimate();

@@ -3,6 +3,7 @@
 // the prepared data terms follow its gain only when it is on.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -213,6 +214,46 @@ TEST(NoiseEstimate, SettingSelectsThePlaneResidual) {
   EXPECT_LT(mean.data_weight[0].at(0, 45, 60),
             plane.data_weight[0].at(0, 45, 60) / 1.4f);
   EXPECT_GT(plane.data_weight[0].at(0, 45, 60), 0.5f / 1.1f);
+}
+
+TEST(NoiseEstimate, WindowAtOnePixelMatchesTheRowKernels) {
+  // With holes and at the borders, under both models.
+  PlanarImage f = noiseField(50, 40, 3, 0.1, 9);
+  for (int y = 0; y < 40; y += 3) {
+    for (int c = 0; c < 3; ++c) f.at(c, y, (7 * y) % 50) = 0.0f;
+  }
+  for (int r : {1, 3}) {
+    std::vector<float> mean(f.pixelCount()), plane(f.pixelCount());
+    internal::whiteNoiseSpreadInto(f, r, mean.data(), 1);
+    internal::planeResidualSpreadInto(f, r, plane.data(), 1);
+    for (int y : {0, 1, 13, 38, 39}) {
+      for (int x : {0, 2, 21, 48, 49}) {
+        const std::size_t i = static_cast<std::size_t>(y) * 50 + x;
+        EXPECT_NEAR(internal::windowSpreadAt(f, r, x, y, false), mean[i], 2e-4f)
+            << r << ": " << x << ", " << y;
+        EXPECT_NEAR(internal::windowSpreadAt(f, r, x, y, true), plane[i], 2e-4f)
+            << r << ": " << x << ", " << y;
+      }
+    }
+  }
+}
+
+TEST(NoiseEstimate, GridOfCentresReadsTheMedianOfEveryPixel) {
+  // 640 x 480 is read at about kNoiseSamples centres.
+  const PlanarImage f = noiseField(640, 480, 3, 0.1, 10);
+  const int stride = internal::noiseSampleStride(640, 480);
+  EXPECT_GE(stride, 8);
+  EXPECT_EQ(internal::noiseSampleStride(120, 90), 3);
+  EXPECT_EQ(internal::noiseSampleStride(40, 30), 1);
+  const internal::NoiseEstimate e = internal::estimateNoise(f, 1, 4, 1, true);
+  ASSERT_EQ(e.scales, 3);
+  for (int k = 0; k < e.scales; ++k) {
+    std::vector<float> all(f.pixelCount());
+    internal::planeResidualSpreadInto(f, e.radius[k], all.data(), 1);
+    std::nth_element(all.begin(), all.begin() + all.size() / 2, all.end());
+    EXPECT_NEAR(e.sigma[k], all[all.size() / 2], 0.02f * all[all.size() / 2])
+        << "radius " << e.radius[k];
+  }
 }
 
 }  // namespace

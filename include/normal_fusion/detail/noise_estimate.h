@@ -62,6 +62,19 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
 void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
                              int threads);
 
+/// sigma_r of the window around (x, y) alone, under the mean model
+/// (whiteNoiseSpreadInto()) or around the plane (planeResidualSpreadInto()),
+/// computed in double.
+float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
+                     bool plane_residual);
+
+/// About how many window centres estimateNoise() reads.
+constexpr int kNoiseSamples = 1024;
+
+/// The spacing of estimateNoise()'s grid of centres (x, y = stride / 2 +
+/// k stride): about kNoiseSamples centres, every pixel on small images.
+int noiseSampleStride(int width, int height);
+
 /// The most scales of a NoiseEstimate (radii r0, 2 r0, 4 r0, ...).
 constexpr int kMaxNoiseScales = 8;
 
@@ -69,7 +82,8 @@ constexpr int kMaxNoiseScales = 8;
 struct NoiseEstimate {
   int scales = 0;
   std::array<int, kMaxNoiseScales> radius{};
-  /// Median of sigma_r over the pixels with 2 samples at the smallest radius.
+  /// Median of sigma_r over the centres with 2 samples at the smallest
+  /// radius.
   std::array<float, kMaxNoiseScales> sigma{};
   /// max over the scales of sigma_r / sigma_r0, at least 1 (also where the
   /// input has too few samples), at most (2 r_max + 1) / (2 r0 + 1): about 1
@@ -79,7 +93,8 @@ struct NoiseEstimate {
 };
 
 /// The estimate of f at radii base_radius, 2 base_radius, 4 base_radius, ...
-/// up to max_radius (max_radius itself the last one), each spread around
+/// up to max_radius (max_radius itself the last one), read at the centres of
+/// noiseSampleStride()'s grid (windowSpreadAt()), each spread around
 /// the window's mean or, with plane_residual, around its least-squares plane
 /// (planeResidualSpreadInto()). Buffers grown once per thread, then reused.
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
