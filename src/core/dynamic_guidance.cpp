@@ -51,6 +51,9 @@ void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
   // and the frames after reuse the buffers.
   image_weight_.resize(finest.width, finest.height, 2);
   image_weight_.resizeKeepingCapacity(level.width, level.height, 2);
+  // A much larger frame's buffers are given back (PlanarImage's rule).
+  releaseIfOversized(row_sums_, static_cast<std::size_t>(finest.height));
+  releaseIfOversized(observed_, finest.edge_weight.pixelCount());
   if (row_sums_.size() < static_cast<std::size_t>(finest.height)) {
     row_sums_.resize(finest.height);
   }

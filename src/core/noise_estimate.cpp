@@ -130,38 +130,35 @@ void weightedWindowSums(int W, int r, int p, const float* __restrict in,
 /// (n, Su, Sv, Suu, Suv, Svv, F_c, Fu_c, Fv_c): each component of f fitted as
 /// a + b u + c v over the valid pixels at offsets (u, v); the residual RSS =
 /// sum |f|^2 - sum_c b_c^T A^-1 b_c (A the moments of the mask, b_c those of
-/// f_c) read as white noise. Where the valid pixels are too few or on one
-/// line, the mean model's value; -1 below 2 samples.
+/// f_c) read as white noise. -1 where fewer than 4 valid pixels or pixels
+/// on one line leave the plane undetermined.
 template <typename Moment>
 float planeModelSigma(const Moment& m) {
   const double n = m(0);
-  if (n < 2.0) return -1.0f;
+  if (n < 4.0) return -1.0f;
   // Moments about the valid pixels' centroid (mu, mv).
   const double mu = m(1) / n, mv = m(2) / n;
   const double cuu = m(3) - m(1) * mu, cvv = m(5) - m(2) * mv;
   const double cuv = m(4) - m(1) * mv;
   const double det = cuu * cvv - cuv * cuv;
-  const bool plane = n >= 4.0 && det > 1e-6 * std::max(1.0, cuu * cvv);
-  double rss_mean = n, rss_plane = n;  // sum |f|^2 = n (unit normals)
+  if (!(det > 1e-6 * std::max(1.0, cuu * cvv))) return -1.0f;
+  double rss = n;  // sum |f|^2 = n (unit normals)
   for (int c = 0; c < 3; ++c) {
     const double f = m(6 + c), fu = m(9 + c), fv = m(12 + c);
-    rss_mean -= f * f / n;
     // Covariances of f_c with u and v about the centroid; the plane's share
-    // of the sum of squares is g^T C^-1 g.
+    // of the sum of squares is f^2 / n + g^T C^-1 g.
     const double gu = fu - f * mu, gv = fv - f * mv;
-    if (plane) {
-      rss_plane -= f * f / n +
-                   (cvv * gu * gu - 2.0 * cuv * gu * gv + cuu * gv * gv) / det;
-    }
+    rss -=
+        f * f / n + (cvv * gu * gu - 2.0 * cuv * gu * gv + cuu * gv * gv) / det;
   }
-  const double rss = std::max(0.0, plane ? rss_plane : rss_mean);
-  // E RSS = sigma^2 (n - k) for k fitted coefficients per component; the
+  // E RSS = sigma^2 (n - 3) per component (3 fitted coefficients); the
   // estimate's median is what is read, and the median of a chi with few
-  // degrees of freedom (2 (n - k): two tangent axes) lies below its
+  // degrees of freedom (2 (n - 3): two tangent axes) lies below its
   // root-mean-square by (1 - 2 / (9 dof))^(3/2) (Wilson-Hilferty).
-  const double dof_per_axis = n - (plane ? 3.0 : 1.0);
+  const double dof_per_axis = n - 3.0;
   const double median_bias = std::pow(1.0 - 1.0 / (9.0 * dof_per_axis), 1.5);
-  return static_cast<float>(std::sqrt(rss / dof_per_axis) / median_bias);
+  return static_cast<float>(std::sqrt(std::max(0.0, rss) / dof_per_axis) /
+                            median_bias);
 }
 
 /// One row of planeModelSigma() from the window rows m[0..14].
@@ -275,6 +272,27 @@ float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
                         : meanModelSigma(m[0], m[6], m[7], m[8]);
 }
 
+namespace {
+
+/// The grid's centres whose own pixel the input observes.
+std::size_t observedCentres(const PlanarImage& data, int stride, int cols,
+                            int rows) {
+  std::size_t count = 0;
+  for (int j = 0; j < rows; ++j) {
+    for (int i = 0; i < cols; ++i) {
+      const std::size_t p =
+          static_cast<std::size_t>(stride / 2 + j * stride) * data.width() +
+          stride / 2 + i * stride;
+      const float fx = data.plane(0)[p], fy = data.plane(1)[p],
+                  fz = data.plane(2)[p];
+      count += fx * fx + fy * fy + fz * fz > 0.0f ? 1 : 0;
+    }
+  }
+  return count;
+}
+
+}  // namespace
+
 int noiseSampleStride(int width, int height) {
   const double pixels = static_cast<double>(width) * height;
   return std::max(1, static_cast<int>(std::sqrt(pixels / kNoiseSamples)));
@@ -311,11 +329,17 @@ NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
                            stride / 2 + j * stride, plane_residual);
       }
     }
-    // Median over the centres with 2 samples at the base radius (the wider
-    // windows hold them too), so that every scale counts the same centres.
+    // Median over the centres whose base window reads a spread (the wider
+    // windows hold it too), so that every scale counts the same centres.
     samples.clear();
     for (std::size_t i = 0; i < centres; ++i) {
       if (base_spread[i] >= 0.0f) samples.push_back(out[i]);
+    }
+    if (plane_residual && estimate.scales == 0 &&
+        samples.size() < observedCentres(data, stride, cols, rows) / 2) {
+      // A sparse input's base windows seldom determine a plane: its
+      // reading would rest on a few centres, so it keeps the mean model.
+      return estimateNoise(data, base_radius, max_radius, threads, false);
     }
     if (samples.empty()) return NoiseEstimate();
     const auto middle = samples.begin() + samples.size() / 2;

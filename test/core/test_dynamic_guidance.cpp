@@ -201,10 +201,12 @@ TEST(DynamicGuidance, WeightsFollowTheNormalsAndTheImageWeightsComeBack) {
 // than under a uniform image (what the next test rules out).
 TEST(DynamicGuidance, WithoutItTheTextureShowsInTheOutput) {
   NormalMap gt;
+  SolverSettings unguided;
+  unguided.dynamic_guidance = 0.0;
   const double uniform =
-      meanError(Solver().solve(texturedPlane(false, 0.3, &gt)), gt);
+      meanError(Solver(unguided).solve(texturedPlane(false, 0.3, &gt)), gt);
   const double textured =
-      meanError(Solver().solve(texturedPlane(true, 0.3, &gt)), gt);
+      meanError(Solver(unguided).solve(texturedPlane(true, 0.3, &gt)), gt);
   EXPECT_GT(textured, 3.0 * uniform)
       << "uniform " << uniform << " textured " << textured;
 }

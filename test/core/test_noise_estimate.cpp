@@ -96,6 +96,8 @@ TEST(NoiseEstimate, ThresholdAndWeightFollowTheGainOnlyWhenOn) {
   shared.normals = noiseField(W, H, 5, 0.1, 4);
   problem.inputs = {shared};
   SolverSettings settings;
+  settings.noise_radius = 0;
+  settings.noise_plane_residual = false;
   const internal::PreparedLevel off =
       internal::prepareFinest(problem, settings);
   settings.noise_radius = 8;
@@ -204,6 +206,7 @@ TEST(NoiseEstimate, SettingSelectsThePlaneResidual) {
   SolverSettings settings;
   settings.noise_radius = 8;
   settings.noise_weight_power = 1.0;
+  settings.noise_plane_residual = false;
   const internal::PreparedLevel mean =
       internal::prepareFinest(problem, settings);
   settings.noise_plane_residual = true;
@@ -254,6 +257,27 @@ TEST(NoiseEstimate, GridOfCentresReadsTheMedianOfEveryPixel) {
     EXPECT_NEAR(e.sigma[k], all[all.size() / 2], 0.02f * all[all.size() / 2])
         << "radius " << e.radius[k];
   }
+}
+
+TEST(NoiseEstimate, SparseInputKeepsTheMeanModel) {
+  // 5 % of the pixels: few 3x3 windows determine a plane.
+  PlanarImage f = noiseField(160, 120, 1, 0.1, 11);
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> keep(0.0, 1.0);
+  for (int y = 0; y < 120; ++y) {
+    for (int x = 0; x < 160; ++x) {
+      if (keep(rng) < 0.05) continue;
+      for (int c = 0; c < 3; ++c) f.at(c, y, x) = 0.0f;
+    }
+  }
+  const internal::NoiseEstimate mean = internal::estimateNoise(f, 1, 4, 1);
+  const internal::NoiseEstimate plane =
+      internal::estimateNoise(f, 1, 4, 1, true);
+  ASSERT_EQ(plane.scales, mean.scales);
+  for (int k = 0; k < mean.scales; ++k) {
+    EXPECT_EQ(plane.sigma[k], mean.sigma[k]) << "scale " << k;
+  }
+  EXPECT_EQ(plane.gain, mean.gain);
 }
 
 }  // namespace

@@ -49,6 +49,7 @@ TEST(LocalStatistics, ThresholdsFollowTheSpreadAndSparseSamplesCountMore) {
   settings.data_eps_local = 1.0;
   settings.density_power = 1.0;
   settings.local_radius = 1;
+  settings.noise_radius = 0;  // the 3x3 statistics alone
   const internal::PreparedLevel level =
       internal::prepareFinest(problem, settings);
   ASSERT_TRUE(level.data_huber);

@@ -141,6 +141,10 @@ NormalMap solveWith(const FusionProblem& problem, double alpha0,
   settings.backend = backend;
   settings.lambda = 0.1;
   settings.tgv_alpha0 = alpha0;
+  // The second-order term against plain first-order TV: the image's weights
+  // alone, no noise estimate.
+  settings.dynamic_guidance = 0.0;
+  settings.noise_radius = 0;
   settings.max_total_inner_iterations = 3000;
   settings.relative_tolerance = 1e-6;
   return Solver(settings).solve(problem, report);

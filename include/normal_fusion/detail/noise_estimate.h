@@ -57,8 +57,8 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
 /// (u, v) from x) instead of its mean:
 ///   sigma_r(x) = sqrt(RSS_r(x) / (n_r(x) - 3)),
 /// so that a surface turning steadily (a cylinder, a sphere) reads its noise
-/// and not its bend; the mean model's value where fewer than 4 valid pixels
-/// or only pixels on one line leave the plane undetermined.
+/// and not its bend; -1 where fewer than 4 valid pixels or pixels all on
+/// one line leave the plane undetermined.
 void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
                              int threads);
 
@@ -96,7 +96,9 @@ struct NoiseEstimate {
 /// up to max_radius (max_radius itself the last one), read at the centres of
 /// noiseSampleStride()'s grid (windowSpreadAt()), each spread around
 /// the window's mean or, with plane_residual, around its least-squares plane
-/// (planeResidualSpreadInto()). Buffers grown once per thread, then reused.
+/// (planeResidualSpreadInto()); an input whose base windows determine a plane
+/// at fewer than half of the centres it observes (a sparse input) is read
+/// around the mean. Buffers grown once per thread, then reused.
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
                             int max_radius, int threads,
                             bool plane_residual = false);
