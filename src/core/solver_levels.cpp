@@ -147,12 +147,41 @@ namespace {
 /// single separable pass leaves.
 constexpr int kFilterPasses = 3;
 
-/// One row filtered in place by the first-order recursive filter u[x] +=
-/// c[x-1] (u[x-1] - u[x]) forward then u[x] += c[x] (u[x+1] - u[x])
-/// backward, c[x] the coupling of x and x+1.
-void filterRow(int W, const float* c, float* u) {
-  for (int x = 1; x < W; ++x) u[x] += c[x - 1] * (u[x - 1] - u[x]);
-  for (int x = W - 2; x >= 0; --x) u[x] += c[x] * (u[x + 1] - u[x]);
+/// Couplings below this are 0: no smoothing to speak of, and their squares
+/// in later passes would be denormal floats, which are slow.
+constexpr float kNoCoupling = 1e-9f;
+
+/// The link a^(1/w) = exp(log_a / w) of an edge weight w, 0 below
+/// kNoCoupling.
+inline float coupling(float log_a, float w) {
+  const float e = log_a / std::max(w, 1e-12f);
+  return e > -20.0f ? std::exp(e) : 0.0f;
+}
+
+/// Rows of kRowGroup filtered together along x, so that their recursions
+/// (one per row and plane) run side by side instead of each waiting on its
+/// last step.
+constexpr int kRowGroup = 4;
+
+/// R rows from offset `row0` of the three planes u filtered in place by the
+/// first-order recursive filter u[x] += c[x-1] (u[x-1] - u[x]) forward, then
+/// u[x] += c[x] (u[x+1] - u[x]) backward, c[x] the coupling of x and x+1.
+template <int R>
+void filterRows(int W, std::size_t row0, const float* c, float* const u[3]) {
+  for (int x = 1; x < W; ++x) {
+    for (int r = 0; r < R; ++r) {
+      const std::size_t j = row0 + static_cast<std::size_t>(r) * W + x;
+      const float cj = c[j - 1];
+      for (int k = 0; k < 3; ++k) u[k][j] += cj * (u[k][j - 1] - u[k][j]);
+    }
+  }
+  for (int x = W - 2; x >= 0; --x) {
+    for (int r = 0; r < R; ++r) {
+      const std::size_t j = row0 + static_cast<std::size_t>(r) * W + x;
+      const float cj = c[j];
+      for (int k = 0; k < 3; ++k) u[k][j] += cj * (u[k][j + 1] - u[k][j]);
+    }
+  }
 }
 
 /// Columns x0 .. x1 - 1 of a plane filtered in place down then up the rows,
@@ -203,8 +232,8 @@ void initializeFiltered(const PreparedLevel& level, VisibilityMode mode,
         for (int k = 0; k < 3; ++k) v[k] += cw * level.data[l].plane(k)[j];
       }
       for (int k = 0; k < 3; ++k) sum[k][j] = v[k];
-      c_h[j] = x + 1 < W && w_h[j] > 1e-6f ? std::exp(log_a / w_h[j]) : 0.0f;
-      c_v[j] = y + 1 < H && w_v[j] > 1e-6f ? std::exp(log_a / w_v[j]) : 0.0f;
+      c_h[j] = x + 1 < W ? coupling(log_a, w_h[j]) : 0.0f;
+      c_v[j] = y + 1 < H ? coupling(log_a, w_v[j]) : 0.0f;
     }
   }
   constexpr int kColumnBlock = 64;
@@ -214,15 +243,20 @@ void initializeFiltered(const PreparedLevel& level, VisibilityMode mode,
       // Each pass halves sigma: a^(1/w) becomes its square.
 #pragma omp parallel for num_threads(threads) schedule(static)
       for (std::size_t j = 0; j < N; ++j) {
-        c_h[j] *= c_h[j];
-        c_v[j] *= c_v[j];
+        const float h = c_h[j] * c_h[j], v = c_v[j] * c_v[j];
+        c_h[j] = h < kNoCoupling ? 0.0f : h;
+        c_v[j] = v < kNoCoupling ? 0.0f : v;
       }
     }
-#pragma omp parallel for num_threads(threads) schedule(static) collapse(2)
-    for (int k = 0; k < 3; ++k) {
-      for (int y = 0; y < H; ++y) {
-        const std::size_t row = static_cast<std::size_t>(y) * W;
-        filterRow(W, c_h + row, sum[k] + row);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int y = 0; y < H; y += kRowGroup) {
+      const std::size_t row0 = static_cast<std::size_t>(y) * W;
+      if (y + kRowGroup <= H) {
+        filterRows<kRowGroup>(W, row0, c_h, sum);
+      } else {
+        for (int r = y; r < H; ++r) {
+          filterRows<1>(W, static_cast<std::size_t>(r) * W, c_h, sum);
+        }
       }
     }
 #pragma omp parallel for num_threads(threads) schedule(static) collapse(2)
