@@ -151,8 +151,8 @@ constexpr int kFilterPasses = 3;
 /// in later passes would be denormal floats, which are slow.
 constexpr float kNoCoupling = 1e-9f;
 
-/// The link a^(1/w) = exp(log_a / w) of an edge weight w, 0 below
-/// kNoCoupling.
+/// The link a^(1/w) = exp(log_a / w) of an edge weight w, 0 below exp(-20)
+/// (about kNoCoupling).
 inline float coupling(float log_a, float w) {
   const float e = log_a / std::max(w, 1e-12f);
   return e > -20.0f ? std::exp(e) : 0.0f;
@@ -216,8 +216,9 @@ void initializeFiltered(const PreparedLevel& level, VisibilityMode mode,
   float* c_v = scratch.plane(4);
   const float* w_h = level.edge_weight.plane(0);
   const float* w_v = level.edge_weight.plane(1);
-  // First pass: a = exp(-sqrt(2) / sigma_0), sigma_0 = sigma sqrt(3) 2^(P-1)
-  // / sqrt(4^P - 1), the link a^(1 / w) (a weak edge weight is a long way).
+  // First pass: a = exp(-sqrt(2) / sigma_0), sigma_0 = radius sqrt(3)
+  // 2^(P-1) / sqrt(4^P - 1), the link a^(1 / w) (a weak edge weight is a
+  // long way).
   const double sigma0 = radius * std::sqrt(3.0) *
                         std::pow(2.0, kFilterPasses - 1) /
                         std::sqrt(std::pow(4.0, kFilterPasses) - 1.0);
