@@ -3,9 +3,9 @@
 // the synthetic scenes at sigma = 0.4, for several schedules (plain
 // Chambolle-Pock, other splits of inner and outer iterations, diagonal
 // preconditioning, the pyramid, the balance of the steps between the normals
-// and the duals, the relaxed iteration). Prints tables; --select 0,4,14
-// runs only those schedules (E* then comes from them). Not a test: timings
-// depend on the machine and its load.
+// and the duals, the relaxed iteration, the filtered cold start). Prints
+// tables; --select 0,4,14 runs only those schedules (E* then comes from them).
+// Not a test: timings depend on the machine and its load.
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -28,6 +28,7 @@ struct Schedule {
   int pyramid_levels;
   double step_balance;
   double over_relaxation = 1.0;
+  int cold_filter_radius = 0;  ///< SolverSettings::cold_filter_radius
 };
 
 struct Options {
@@ -97,6 +98,10 @@ std::vector<Schedule> schedules() {
        0.125, 1.9},
       {"preconditioned, 50 inner, balance 0.5, relaxation 1.9", 50, true, 1,
        0.5, 1.9},
+      {"preconditioned, 50 inner, balance 0.25, filtered start 8", 50, true, 1,
+       0.25, 1.0, 8},
+      {"preconditioned, 10 inner, balance 0.25, filtered start 8", 10, true, 1,
+       0.25, 1.0, 8},
   };
 }
 
@@ -127,6 +132,7 @@ std::vector<nf::SolveReport> longRuns(const nf::FusionProblem& problem,
     settings.pyramid_levels = all[i].pyramid_levels;
     settings.step_balance = all[i].step_balance;
     settings.over_relaxation = all[i].over_relaxation;
+    settings.cold_filter_radius = all[i].cold_filter_radius;
     settings.relative_tolerance = 1e-7;
     settings.max_total_inner_iterations = 4000;
     settings.max_outer_iterations = 4000;

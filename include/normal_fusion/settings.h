@@ -193,6 +193,12 @@ struct SolverSettings {
   /// to the finer level, which then starts near its equilibrium; false: the
   /// duals restart from 0 at every level.
   bool prolong_duals = settings_default::prolong_duals;
+  /// A cold start's normals (the coarsest level's with the pyramid): 0 =
+  /// the first input with data per pixel; r > 0 = the inputs' data-weighted
+  /// mean smoothed by the domain transform's recursive filter over about r
+  /// pixels, its links cut by the edge weights, so that the iterations start
+  /// near a smooth solution rather than at the noise.
+  int cold_filter_radius = settings_default::cold_filter_radius;
 
   // Execution.
   int num_threads =

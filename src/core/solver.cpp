@@ -181,6 +181,10 @@ void SolverImpl::startCold(const PreparedLevel& level, bool from_coarser) {
   if (from_coarser) {
     internal::upsampleNormals(coarse_result_, level, settings_.visibility,
                               state_.n0, threads_);
+  } else if (settings_.cold_filter_radius > 0) {
+    internal::initializeFiltered(level, settings_.visibility,
+                                 settings_.cold_filter_radius, cold_filter_,
+                                 state_.n0, threads_);
   } else {
     internal::initializeCold(level, settings_.visibility, state_.n0, threads_);
   }

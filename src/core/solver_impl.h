@@ -176,6 +176,8 @@ class SolverImpl {
   /// left).
   std::vector<internal::PreparedLevel> levels_;
   PlanarImage coarse_result_;
+  /// Scratch of the filtered cold start (cold_filter_radius > 0).
+  PlanarImage cold_filter_;
   /// The duals of the last coarser level (SolverSettings::prolong_duals).
   PlanarImage coarse_p_h_, coarse_p_v_;
   std::vector<PlanarImage> coarse_q_;

@@ -142,6 +142,157 @@ void initializeCold(const PreparedLevel& level, VisibilityMode mode,
 
 namespace {
 
+/// The domain transform's passes (Gastal & Oliveira 2011): three, each with
+/// half the spatial extent of the one before, remove most of the stripes a
+/// single separable pass leaves.
+constexpr int kFilterPasses = 3;
+
+/// Couplings below this are 0: no smoothing to speak of, and their squares
+/// in later passes would be denormal floats, which are slow.
+constexpr float kNoCoupling = 1e-9f;
+
+/// The link a^(1/w) = exp(log_a / w) of an edge weight w, 0 below exp(-20)
+/// (about kNoCoupling).
+inline float coupling(float log_a, float w) {
+  const float e = log_a / std::max(w, 1e-12f);
+  return e > -20.0f ? std::exp(e) : 0.0f;
+}
+
+/// Rows of kRowGroup filtered together along x, so that their recursions
+/// (one per row and plane) run side by side instead of each waiting on its
+/// last step.
+constexpr int kRowGroup = 4;
+
+/// R rows from offset `row0` of the three planes u filtered in place by the
+/// first-order recursive filter u[x] += c[x-1] (u[x-1] - u[x]) forward, then
+/// u[x] += c[x] (u[x+1] - u[x]) backward, c[x] the coupling of x and x+1.
+template <int R>
+void filterRows(int W, std::size_t row0, const float* c, float* const u[3]) {
+  for (int x = 1; x < W; ++x) {
+    for (int r = 0; r < R; ++r) {
+      const std::size_t j = row0 + static_cast<std::size_t>(r) * W + x;
+      const float cj = c[j - 1];
+      for (int k = 0; k < 3; ++k) u[k][j] += cj * (u[k][j - 1] - u[k][j]);
+    }
+  }
+  for (int x = W - 2; x >= 0; --x) {
+    for (int r = 0; r < R; ++r) {
+      const std::size_t j = row0 + static_cast<std::size_t>(r) * W + x;
+      const float cj = c[j];
+      for (int k = 0; k < 3; ++k) u[k][j] += cj * (u[k][j + 1] - u[k][j]);
+    }
+  }
+}
+
+/// Columns x0 .. x1 - 1 of a plane filtered in place down then up the rows,
+/// c(y) the coupling of rows y and y+1 (row-wise, so that it vectorises).
+void filterColumns(int W, int H, int x0, int x1, const float* c, float* u) {
+  for (int y = 1; y < H; ++y) {
+    const float* cy = c + static_cast<std::size_t>(y - 1) * W;
+    const float* up = u + static_cast<std::size_t>(y - 1) * W;
+    float* row = u + static_cast<std::size_t>(y) * W;
+    for (int x = x0; x < x1; ++x) row[x] += cy[x] * (up[x] - row[x]);
+  }
+  for (int y = H - 2; y >= 0; --y) {
+    const float* cy = c + static_cast<std::size_t>(y) * W;
+    const float* down = u + static_cast<std::size_t>(y + 1) * W;
+    float* row = u + static_cast<std::size_t>(y) * W;
+    for (int x = x0; x < x1; ++x) row[x] += cy[x] * (down[x] - row[x]);
+  }
+}
+
+}  // namespace
+
+void initializeFiltered(const PreparedLevel& level, VisibilityMode mode,
+                        int radius, PlanarImage& scratch, PlanarImage& n,
+                        int threads) {
+  const int W = level.width, H = level.height, L = level.num_inputs;
+  const std::size_t N = static_cast<std::size_t>(W) * H;
+  n.resizeKeepingCapacity(W, H, 3);
+  // Planes 0 - 2: sum_l c_l f_l; 3, 4: the couplings of the links h, v.
+  scratch.resizeKeepingCapacity(W, H, 5);
+  float* sum[3] = {scratch.plane(0), scratch.plane(1), scratch.plane(2)};
+  float* c_h = scratch.plane(3);
+  float* c_v = scratch.plane(4);
+  const float* w_h = level.edge_weight.plane(0);
+  const float* w_v = level.edge_weight.plane(1);
+  // First pass: a = exp(-sqrt(2) / sigma_0), sigma_0 = radius sqrt(3)
+  // 2^(P-1) / sqrt(4^P - 1), the link a^(1 / w) (a weak edge weight is a
+  // long way).
+  const double sigma0 = radius * std::sqrt(3.0) *
+                        std::pow(2.0, kFilterPasses - 1) /
+                        std::sqrt(std::pow(4.0, kFilterPasses) - 1.0);
+  const float log_a = static_cast<float>(-std::sqrt(2.0) / sigma0);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = static_cast<std::size_t>(y) * W + x;
+      float v[3] = {0.0f, 0.0f, 0.0f};
+      for (int l = 0; l < L; ++l) {
+        const float cw = level.data_weight[l].plane(0)[j];
+        for (int k = 0; k < 3; ++k) v[k] += cw * level.data[l].plane(k)[j];
+      }
+      for (int k = 0; k < 3; ++k) sum[k][j] = v[k];
+      c_h[j] = x + 1 < W ? coupling(log_a, w_h[j]) : 0.0f;
+      c_v[j] = y + 1 < H ? coupling(log_a, w_v[j]) : 0.0f;
+    }
+  }
+  constexpr int kColumnBlock = 64;
+  const int column_blocks = (W + kColumnBlock - 1) / kColumnBlock;
+  for (int pass = 0; pass < kFilterPasses; ++pass) {
+    if (pass > 0) {
+      // Each pass halves sigma: a^(1/w) becomes its square.
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (std::size_t j = 0; j < N; ++j) {
+        const float h = c_h[j] * c_h[j], v = c_v[j] * c_v[j];
+        c_h[j] = h < kNoCoupling ? 0.0f : h;
+        c_v[j] = v < kNoCoupling ? 0.0f : v;
+      }
+    }
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int y = 0; y < H; y += kRowGroup) {
+      const std::size_t row0 = static_cast<std::size_t>(y) * W;
+      if (y + kRowGroup <= H) {
+        filterRows<kRowGroup>(W, row0, c_h, sum);
+      } else {
+        for (int r = y; r < H; ++r) {
+          filterRows<1>(W, static_cast<std::size_t>(r) * W, c_h, sum);
+        }
+      }
+    }
+#pragma omp parallel for num_threads(threads) schedule(static) collapse(2)
+    for (int k = 0; k < 3; ++k) {
+      for (int b = 0; b < column_blocks; ++b) {
+        filterColumns(W, H, b * kColumnBlock,
+                      std::min(W, (b + 1) * kColumnBlock), c_v, sum[k]);
+      }
+    }
+  }
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = static_cast<std::size_t>(y) * W + x;
+      float v[3] = {sum[0][j], sum[1][j], sum[2][j]};
+      const float len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+      // No data reached this pixel (or the inputs cancel): the data start.
+      if (!(len2 > 1e-24f && len2 <= kFloatMax)) {
+        coldNormal(level, mode, x, y, v);
+      } else {
+        const float inv = 1.0f / std::sqrt(len2);
+        for (int k = 0; k < 3; ++k) v[k] *= inv;
+        if (mode == VisibilityMode::kSoft) {
+          float r[3];
+          level.ray(x, y, r);
+          projectVisible(r, v);
+        }
+      }
+      for (int k = 0; k < 3; ++k) n.plane(k)[j] = v[k];
+    }
+  }
+}
+
+namespace {
+
 /// One row of a warm start's normals made usable, branch-free
 /// (vectorised): n / |n|, projected onto the visible set in soft mode
 /// (projectVisible(), with the ray K^-1 (x, y, 1) in float); missing[x] = 1

@@ -62,7 +62,7 @@ std::size_t SolverImpl::bytesHeld() const {
       refine_.gathered.bytesHeld() + internal::bytesHeld(edge_scratch_map_) +
       internal::bytesHeld(fill_pending_) + internal::bytesHeld(unknown_) +
       internal::bytesHeld(refine_.iterate_saved) + coarse_p_h_.bytesHeld() +
-      coarse_p_v_.bytesHeld();
+      coarse_p_v_.bytesHeld() + cold_filter_.bytesHeld();
   for (const PlanarImage& q : coarse_q_) bytes += q.bytesHeld();
   for (const internal::PreparedLevel& level : levels_) {
     bytes += level.bytesHeld();
@@ -78,6 +78,7 @@ void SolverImpl::fitBuffers(int W, int H) {
   internal::releaseIfOversized(coarse_result_, 3 * N);
   internal::releaseIfOversized(coarse_p_h_, 3 * N);
   internal::releaseIfOversized(coarse_p_v_, 3 * N);
+  internal::releaseIfOversized(cold_filter_, 5 * N);
   for (PlanarImage& q : coarse_q_) internal::releaseIfOversized(q, 3 * N);
   for (std::vector<float>* v :
        {&edge_scratch_.mag_h, &edge_scratch_.mag_v, &edge_scratch_.plane,

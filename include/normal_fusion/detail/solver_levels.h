@@ -20,6 +20,16 @@ void downsampleInto(const PreparedLevel& fine, const SolverSettings& settings,
 void initializeCold(const PreparedLevel& level, VisibilityMode mode,
                     PlanarImage& n, int threads);
 
+/// Cold start from an edge-aware filter of the inputs: sum_l c_l f_l (the
+/// data-weighted mean, c_l the data weights) smoothed by the domain
+/// transform's recursive filter (3 passes, extent `radius` pixels) whose
+/// link between neighbours is a^(1 / w_d), w_d the level's edge weights;
+/// normalized and projected onto the visible set in soft mode. Pixels no data
+/// reaches start as in initializeCold(). `scratch` (5 planes) is reused.
+void initializeFiltered(const PreparedLevel& level, VisibilityMode mode,
+                        int radius, PlanarImage& scratch, PlanarImage& n,
+                        int threads);
+
 /// Upsamples a coarse unit normal map bilinearly (pixel centres aligned),
 /// normalizes, and projects onto the visible set in soft mode.
 void upsampleNormals(const PlanarImage& coarse, const PreparedLevel& fine,
