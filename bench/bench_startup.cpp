@@ -9,7 +9,8 @@
 // converged cold solve of the same frame. Prints a table; not a test.
 //
 //   bench_startup [--frames 30] [--threads 2] [--budget-ms 33]
-//                 [--cold-start-budget-ms 33] [--width 640 --height 480]
+//                 [--cold-start-budget-ms 33] [--cold-filter-radius 0]
+//                 [--width 640 --height 480]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -31,6 +32,7 @@ namespace {
 struct Options {
   int frames = 30, threads = 2, width = 640, height = 480;
   double budget_ms = 33.0, cold_start_budget_ms = 33.0;
+  int cold_filter_radius = 0;
 };
 
 bool parseOptions(int argc, char** argv, Options& o) {
@@ -45,6 +47,8 @@ bool parseOptions(int argc, char** argv, Options& o) {
       o.budget_ms = value;
     } else if (key == "--cold-start-budget-ms") {
       o.cold_start_budget_ms = value;
+    } else if (key == "--cold-filter-radius") {
+      o.cold_filter_radius = static_cast<int>(value);
     } else if (key == "--width") {
       o.width = static_cast<int>(value);
     } else if (key == "--height") {
@@ -75,6 +79,7 @@ nf::SolverSettings liveSettings(const Options& o) {
   s.num_threads = o.threads;
   s.time_budget_ms = o.budget_ms;
   s.cold_start_budget_ms = o.cold_start_budget_ms;
+  s.cold_filter_radius = o.cold_filter_radius;
   s.relative_tolerance = 1e-6;
   s.max_total_inner_iterations = 4000;
   s.max_outer_iterations = 400;
@@ -106,10 +111,10 @@ int main(int argc, char** argv) {
   std::printf("%s\n", nf::bench::machineLine().c_str());
   std::printf(
       "start-up of a live stream: %dx%d, scene 0 panning 0.3 deg/frame, two "
-      "inputs, %d threads, budget %.1f ms, cold start budget %.1f ms, sets "
-      "every %.1f ms\n\n",
+      "inputs, %d threads, budget %.1f ms, cold start budget %.1f ms, cold "
+      "filter radius %d, sets every %.1f ms\n\n",
       o.width, o.height, o.threads, o.budget_ms, o.cold_start_budget_ms,
-      period_ms);
+      o.cold_filter_radius, period_ms);
   std::printf(
       "| frame | frame ms | sets dropped meanwhile | converging | whole-image "
       "its (rejected steps) | refine its | PSNR live | PSNR converged | "
