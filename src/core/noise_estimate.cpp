@@ -302,10 +302,10 @@ NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
                             int max_radius, int threads, bool plane_residual) {
   NoiseEstimate estimate;
   const int W = data.width(), H = data.height();
-  // The windows around a grid of centres: the median of a few thousand reads
-  // the image's as well as that of every pixel (its relative error about
-  // 1.25 / sqrt(samples) of the windows' spread), at a small share of the
-  // cost.
+  // The windows around a grid of centres: the median of about a thousand
+  // reads the image's as well as that of every pixel (its relative error
+  // about 1.25 / sqrt(samples) of the windows' spread), at a small share of
+  // the cost.
   const int stride = noiseSampleStride(W, H);
   const int cols = (W + stride - 1 - stride / 2) / stride;
   const int rows = (H + stride - 1 - stride / 2) / stride;

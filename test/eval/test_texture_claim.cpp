@@ -4,6 +4,7 @@
 // output turns no more from one cell to the next than inside a cell.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -26,7 +27,7 @@ struct TexturedPlane {
   ScalarMap depth_m;
 };
 
-/// A plane 1.5 m in front of the camera, turned to it by about 20 degrees,
+/// A plane 1.5 m in front of the camera, turned from it by about 14 degrees,
 /// under a checkerboard of kCell-pixel cells (grey 0.15 and 0.85).
 TexturedPlane texturedPlane() {
   TexturedPlane scene;

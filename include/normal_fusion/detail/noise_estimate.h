@@ -55,7 +55,8 @@ void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
 /// As whiteNoiseSpreadInto() around the window's least-squares plane of f
 /// (each component fitted as a + b u + c v over the valid pixels at offsets
 /// (u, v) from x) instead of its mean:
-///   sigma_r(x) = sqrt(RSS_r(x) / (n_r(x) - 3)),
+///   sigma_r(x) = sqrt(RSS_r(x) / (n_r(x) - 3)) / (1 - 1 / (9 (n_r - 3)))^1.5
+/// (the last factor: a chi's median over its RMS, since the median is read),
 /// so that a surface turning steadily (a cylinder, a sphere) reads its noise
 /// and not its bend; -1 where fewer than 4 valid pixels or pixels all on
 /// one line leave the plane undetermined.
