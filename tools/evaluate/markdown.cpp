@@ -49,6 +49,11 @@ std::string settingsText(const nf::SolverSettings& s) {
         << s.noise_weight_power
         << (s.noise_plane_residual ? ", about a plane" : "");
   }
+  if (s.dynamic_guidance > 0.0) {
+    out << ", dynamic guidance " << s.dynamic_guidance << " at "
+        << s.dynamic_guidance_deg << " deg";
+  }
+  if (s.tgv_alpha0 > 0.0) out << ", tgv alpha0 " << s.tgv_alpha0;
   out << ", backend " << nf::toString(s.backend);
   return out.str();
 }
