@@ -1,6 +1,6 @@
 // The per-input noise estimate across scales (docs/algorithm.md, Data terms):
-// window sums of f at growing radii, the spread each window reads, its median
-// over the image per radius.
+// the spread each window around a grid of centres reads at growing radii,
+// its median per radius; and the window sums of the local statistics.
 #include "normal_fusion/detail/noise_estimate.h"
 
 #include <algorithm>
@@ -64,87 +64,24 @@ void windowResultantRow(const PlanarImage& data, int r, int y,
 
 namespace {
 
-/// One row of sigma_r from the window sums (resultant s, valid count n).
-/// Branch-free (vectorised).
-NF_MULTIVERSION
-void whiteNoiseSpreadRow(int W, const float* __restrict sx,
-                         const float* __restrict sy, const float* __restrict sz,
-                         const float* __restrict count,
-                         float* __restrict sigma) {
-  for (int x = 0; x < W; ++x) {
-    const float n = std::max(count[x], 1.0f);
-    // s^2 = 2 (1 - R), R = |sum f| / n: the mean squared distance of unit
-    // vectors from their normalized mean.
-    const float R =
-        std::sqrt(sx[x] * sx[x] + sy[x] * sy[x] + sz[x] * sz[x]) / n;
-    const float s2 = std::max(0.0f, 2.0f * (1.0f - R));
-    // E s^2 = sigma^2 (1 - 1 / n) for n independent samples.
-    const float unbiased = std::sqrt(s2 / std::max(1.0f - 1.0f / n, 0.5f));
-    sigma[x] = count[x] >= 2.0f ? unbiased : -1.0f;
-  }
-}
-
-}  // namespace
-
-void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
-                          int threads) {
-  const int W = data.width(), H = data.height();
-#pragma omp parallel num_threads(threads)
-  {
-    // Per thread: column sums (col_*) and window sums (win_*) of f and of
-    // the valid count; grown once, then reused.
-    thread_local std::vector<float> scratch;
-    const std::size_t scratch_values =
-        WindowSumRows::kRows * static_cast<std::size_t>(W);
-    releaseIfOversized(scratch, scratch_values);
-    if (scratch.size() < scratch_values) scratch.resize(scratch_values);
-    WindowSumRows rows(scratch.data(), W);
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      // Resultant and count of the window around row y.
-      windowResultantRow(data, r, y, rows);
-      whiteNoiseSpreadRow(W, rows.win[0], rows.win[1], rows.win[2], rows.win[3],
-                          out + static_cast<std::size_t>(y) * W);
-    }
-  }
-}
-
-namespace {
-
-/// out(x) = sum over d = -r .. r inside the row of d^p in(x + d), p = 1, 2:
-/// the horizontal moments of the plane fit (p = 0 is windowSums()).
-NF_MULTIVERSION
-void weightedWindowSums(int W, int r, int p, const float* __restrict in,
-                        float* __restrict out) {
-  std::fill(out, out + W, 0.0f);
-  for (int d = -r; d <= r; ++d) {
-    if (d == 0) continue;
-    const float weight = p == 1 ? static_cast<float>(d)
-                                : static_cast<float>(d) * static_cast<float>(d);
-    const int lo = std::max(0, -d), hi = std::min(W, W - d);
-    for (int x = lo; x < hi; ++x) out[x] += weight * in[x + d];
-  }
-}
-
 /// sigma_r around the window's least-squares plane from its moments m =
 /// (n, Su, Sv, Suu, Suv, Svv, F_c, Fu_c, Fv_c): each component of f fitted as
 /// a + b u + c v over the valid pixels at offsets (u, v); the residual RSS =
 /// sum |f|^2 - sum_c b_c^T A^-1 b_c (A the moments of the mask, b_c those of
 /// f_c) read as white noise. -1 where fewer than 4 valid pixels or pixels
 /// on one line leave the plane undetermined.
-template <typename Moment>
-float planeModelSigma(const Moment& m) {
-  const double n = m(0);
+float planeModelSigma(const std::array<double, 15>& m) {
+  const double n = m[0];
   if (n < 4.0) return -1.0f;
   // Moments about the valid pixels' centroid (mu, mv).
-  const double mu = m(1) / n, mv = m(2) / n;
-  const double cuu = m(3) - m(1) * mu, cvv = m(5) - m(2) * mv;
-  const double cuv = m(4) - m(1) * mv;
+  const double mu = m[1] / n, mv = m[2] / n;
+  const double cuu = m[3] - m[1] * mu, cvv = m[5] - m[2] * mv;
+  const double cuv = m[4] - m[1] * mv;
   const double det = cuu * cvv - cuv * cuv;
   if (!(det > 1e-6 * std::max(1.0, cuu * cvv))) return -1.0f;
   double rss = n;  // sum |f|^2 = n (unit normals)
   for (int c = 0; c < 3; ++c) {
-    const double f = m(6 + c), fu = m(9 + c), fv = m(12 + c);
+    const double f = m[6 + c], fu = m[9 + c], fv = m[12 + c];
     // Covariances of f_c with u and v about the centroid; the plane's share
     // of the sum of squares is f^2 / n + g^T C^-1 g.
     const double gu = fu - f * mu, gv = fv - f * mv;
@@ -161,86 +98,19 @@ float planeModelSigma(const Moment& m) {
                             median_bias);
 }
 
-/// One row of planeModelSigma() from the window rows m[0..14].
-void planeResidualSpreadRow(int W, const float* const* m, float* sigma) {
-  for (int x = 0; x < W; ++x) {
-    sigma[x] = planeModelSigma([&](int k) { return double{m[k][x]}; });
-  }
-}
-
-/// The white-noise reading of the window mean's spread (whiteNoiseSpreadRow
-/// for one pixel, in double).
+/// sigma_r around the window's mean from its valid count n and resultant
+/// (sx, sy, sz); -1 below 2 samples.
 float meanModelSigma(double n, double sx, double sy, double sz) {
   if (n < 2.0) return -1.0f;
+  // s^2 = 2 (1 - R), R = |sum f| / n: the mean squared distance of unit
+  // vectors from their normalized mean.
   const double R = std::sqrt(sx * sx + sy * sy + sz * sz) / n;
   const double s2 = std::max(0.0, 2.0 * (1.0 - R));
+  // E s^2 = sigma^2 (1 - 1 / n) for n independent samples.
   return static_cast<float>(std::sqrt(s2 / std::max(1.0 - 1.0 / n, 0.5)));
 }
 
 }  // namespace
-
-void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
-                             int threads) {
-  const int W = data.width(), H = data.height();
-  // Column rows: mask moments 1, v, v^2 and f_c times 1, v (9); window rows:
-  // n, Su, Sv, Suu, Suv, Svv, F_c, Fu_c, Fv_c (15).
-  constexpr int kColumnRows = 9, kWindowRows = 15;
-#pragma omp parallel num_threads(threads)
-  {
-    thread_local std::vector<float> scratch;
-    const std::size_t scratch_values =
-        static_cast<std::size_t>(kColumnRows + kWindowRows) * W;
-    releaseIfOversized(scratch, scratch_values);
-    if (scratch.size() < scratch_values) scratch.resize(scratch_values);
-    float* col[kColumnRows];
-    float* win[kWindowRows];
-    for (int k = 0; k < kColumnRows; ++k) col[k] = scratch.data() + k * W;
-    for (int k = 0; k < kWindowRows; ++k) {
-      win[k] = scratch.data() + (kColumnRows + k) * W;
-    }
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      // Vertical pass: column moments over rows y - r .. y + r, v = row - y.
-      for (int k = 0; k < kColumnRows; ++k) {
-        std::fill(col[k], col[k] + W, 0.0f);
-      }
-      for (int row = std::max(0, y - r); row <= std::min(H - 1, y + r); ++row) {
-        const float v = static_cast<float>(row - y);
-        const std::size_t off = static_cast<std::size_t>(row) * W;
-        const float* fx = data.plane(0) + off;
-        const float* fy = data.plane(1) + off;
-        const float* fz = data.plane(2) + off;
-        for (int x = 0; x < W; ++x) {
-          const float valid =
-              fx[x] * fx[x] + fy[x] * fy[x] + fz[x] * fz[x] > 0.0f ? 1.0f
-                                                                   : 0.0f;
-          col[0][x] += valid;
-          col[1][x] += v * valid;
-          col[2][x] += v * v * valid;
-          col[3][x] += fx[x];
-          col[4][x] += fy[x];
-          col[5][x] += fz[x];
-          col[6][x] += v * fx[x];
-          col[7][x] += v * fy[x];
-          col[8][x] += v * fz[x];
-        }
-      }
-      // Horizontal pass, u = column - x.
-      windowSums(W, r, col[0], win[0]);             // n
-      weightedWindowSums(W, r, 1, col[0], win[1]);  // Su
-      windowSums(W, r, col[1], win[2]);             // Sv
-      weightedWindowSums(W, r, 2, col[0], win[3]);  // Suu
-      weightedWindowSums(W, r, 1, col[1], win[4]);  // Suv
-      windowSums(W, r, col[2], win[5]);             // Svv
-      for (int c = 0; c < 3; ++c) {
-        windowSums(W, r, col[3 + c], win[6 + c]);             // F_c
-        weightedWindowSums(W, r, 1, col[3 + c], win[9 + c]);  // Fu_c
-        windowSums(W, r, col[6 + c], win[12 + c]);            // Fv_c
-      }
-      planeResidualSpreadRow(W, win, out + static_cast<std::size_t>(y) * W);
-    }
-  }
-}
 
 float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
                      bool plane_residual) {
@@ -268,7 +138,7 @@ float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
       }
     }
   }
-  return plane_residual ? planeModelSigma([&](int k) { return m[k]; })
+  return plane_residual ? planeModelSigma(m)
                         : meanModelSigma(m[0], m[6], m[7], m[8]);
 }
 

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -174,6 +175,73 @@ TEST(NoiseEstimate, PlaneResidualKeepsWhiteAndSharedNoise) {
   EXPECT_LE(shared.gain, 17.0f / 3.0f);
 }
 
+/// sigma_r of one window computed the long way, the oracle of
+/// windowSpreadAt(): the valid pixels gathered; around the mean, the mean
+/// squared distance from the normalized mean; around the plane, each
+/// component's least-squares coefficients from the 3x3 normal equations
+/// (Gaussian elimination) and the residuals summed one by one.
+float referenceSpread(const PlanarImage& f, int r, int x0, int y0, bool plane) {
+  std::vector<std::array<double, 5>> samples;  // u, v, f_x, f_y, f_z
+  for (int y = std::max(0, y0 - r); y <= std::min(f.height() - 1, y0 + r);
+       ++y) {
+    for (int x = std::max(0, x0 - r); x <= std::min(f.width() - 1, x0 + r);
+         ++x) {
+      const double v[3] = {f.at(0, y, x), f.at(1, y, x), f.at(2, y, x)};
+      if (v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > 0.0) {
+        samples.push_back({double(x - x0), double(y - y0), v[0], v[1], v[2]});
+      }
+    }
+  }
+  const double n = static_cast<double>(samples.size());
+  if (!plane) {
+    if (n < 2.0) return -1.0f;
+    double m[3] = {0.0, 0.0, 0.0};
+    for (const auto& s : samples) {
+      for (int c = 0; c < 3; ++c) m[c] += s[2 + c];
+    }
+    const double len = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+    double s2 = 0.0;
+    for (const auto& s : samples) {
+      for (int c = 0; c < 3; ++c) {
+        s2 += (s[2 + c] - m[c] / len) * (s[2 + c] - m[c] / len) / n;
+      }
+    }
+    return static_cast<float>(std::sqrt(s2 / std::max(1.0 - 1.0 / n, 0.5)));
+  }
+  if (n < 4.0) return -1.0f;
+  double rss = 0.0;
+  for (int c = 0; c < 3; ++c) {
+    // [A | b] of a + b u + c v, A = sum phi phi^T, phi = (1, u, v).
+    double a[3][4] = {};
+    for (const auto& s : samples) {
+      const double phi[3] = {1.0, s[0], s[1]};
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) a[i][j] += phi[i] * phi[j];
+        a[i][3] += phi[i] * s[2 + c];
+      }
+    }
+    for (int i = 0; i < 3; ++i) {
+      if (std::abs(a[i][i]) < 1e-9) return -1.0f;
+      for (int k = i + 1; k < 3; ++k) {
+        const double q = a[k][i] / a[i][i];
+        for (int j = i; j < 4; ++j) a[k][j] -= q * a[i][j];
+      }
+    }
+    double beta[3];
+    for (int i = 2; i >= 0; --i) {
+      double t = a[i][3];
+      for (int j = i + 1; j < 3; ++j) t -= a[i][j] * beta[j];
+      beta[i] = t / a[i][i];
+    }
+    for (const auto& s : samples) {
+      const double e = s[2 + c] - beta[0] - beta[1] * s[0] - beta[2] * s[1];
+      rss += e * e;
+    }
+  }
+  return static_cast<float>(std::sqrt(rss / (n - 3.0)) /
+                            std::pow(1.0 - 1.0 / (9.0 * (n - 3.0)), 1.5));
+}
+
 TEST(NoiseEstimate, PlaneResidualOfAPlaneIsZeroAndHolesAreRead) {
   // Noise-free tilted normals are their own plane: every spread 0 where
   // the plane is determined, even with a column of holes through it.
@@ -181,19 +249,17 @@ TEST(NoiseEstimate, PlaneResidualOfAPlaneIsZeroAndHolesAreRead) {
   for (int y = 0; y < 30; ++y) {
     for (int c = 0; c < 3; ++c) f.at(c, y, 20) = 0.0f;
   }
-  std::vector<float> spread(f.pixelCount());
-  internal::planeResidualSpreadInto(f, 2, spread.data(), 1);
   for (int y : {0, 15, 29}) {
     for (int x : {0, 19, 21, 39}) {
-      EXPECT_LT(spread[y * 40 + x], 2e-3f) << x << ", " << y;
+      EXPECT_LT(internal::windowSpreadAt(f, 2, x, y, true), 2e-3f)
+          << x << ", " << y;
     }
   }
   // A pixel whose window holds a single valid pixel reads no spread.
   PlanarImage lone(9, 9, 3);
   lone.at(2, 4, 4) = -1.0f;
-  std::vector<float> lone_spread(lone.pixelCount());
-  internal::planeResidualSpreadInto(lone, 1, lone_spread.data(), 1);
-  EXPECT_EQ(lone_spread[4 * 9 + 4], -1.0f);
+  EXPECT_EQ(internal::windowSpreadAt(lone, 1, 4, 4, true), -1.0f);
+  EXPECT_EQ(internal::windowSpreadAt(lone, 1, 4, 4, false), -1.0f);
 }
 
 TEST(NoiseEstimate, SettingSelectsThePlaneResidual) {
@@ -219,23 +285,20 @@ TEST(NoiseEstimate, SettingSelectsThePlaneResidual) {
   EXPECT_GT(plane.data_weight[0].at(0, 45, 60), 0.5f / 1.1f);
 }
 
-TEST(NoiseEstimate, WindowAtOnePixelMatchesTheRowKernels) {
+TEST(NoiseEstimate, WindowAtOnePixelMatchesTheExplicitFit) {
   // With holes and at the borders, under both models.
   PlanarImage f = noiseField(50, 40, 3, 0.1, 9);
   for (int y = 0; y < 40; y += 3) {
     for (int c = 0; c < 3; ++c) f.at(c, y, (7 * y) % 50) = 0.0f;
   }
   for (int r : {1, 3}) {
-    std::vector<float> mean(f.pixelCount()), plane(f.pixelCount());
-    internal::whiteNoiseSpreadInto(f, r, mean.data(), 1);
-    internal::planeResidualSpreadInto(f, r, plane.data(), 1);
     for (int y : {0, 1, 13, 38, 39}) {
       for (int x : {0, 2, 21, 48, 49}) {
-        const std::size_t i = static_cast<std::size_t>(y) * 50 + x;
-        EXPECT_NEAR(internal::windowSpreadAt(f, r, x, y, false), mean[i], 2e-4f)
-            << r << ": " << x << ", " << y;
-        EXPECT_NEAR(internal::windowSpreadAt(f, r, x, y, true), plane[i], 2e-4f)
-            << r << ": " << x << ", " << y;
+        for (bool plane : {false, true}) {
+          EXPECT_NEAR(internal::windowSpreadAt(f, r, x, y, plane),
+                      referenceSpread(f, r, x, y, plane), 2e-4f)
+              << r << ": " << x << ", " << y << (plane ? " plane" : " mean");
+        }
       }
     }
   }
@@ -251,8 +314,13 @@ TEST(NoiseEstimate, GridOfCentresReadsTheMedianOfEveryPixel) {
   const internal::NoiseEstimate e = internal::estimateNoise(f, 1, 4, 1, true);
   ASSERT_EQ(e.scales, 3);
   for (int k = 0; k < e.scales; ++k) {
-    std::vector<float> all(f.pixelCount());
-    internal::planeResidualSpreadInto(f, e.radius[k], all.data(), 1);
+    std::vector<float> all;
+    all.reserve(f.pixelCount());
+    for (int y = 0; y < 480; ++y) {
+      for (int x = 0; x < 640; ++x) {
+        all.push_back(internal::windowSpreadAt(f, e.radius[k], x, y, true));
+      }
+    }
     std::nth_element(all.begin(), all.begin() + all.size() / 2, all.end());
     EXPECT_NEAR(e.sigma[k], all[all.size() / 2], 0.02f * all[all.size() / 2])
         << "radius " << e.radius[k];

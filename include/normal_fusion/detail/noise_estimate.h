@@ -43,29 +43,20 @@ struct WindowSumRows {
 void windowResultantRow(const PlanarImage& data, int r, int y,
                         WindowSumRows& rows);
 
-/// The noise level of each pixel of f (3 planes, unit or 0 where missing) in
-/// the (2 r + 1)^2 window around it, as white noise would read it:
-///   sigma_r(x) = s_r(x) / sqrt(1 - 1 / n_r(x)),
-/// s_r = sqrt(2 (1 - |sum f| / n_r)) the RMS spread around the window's mean
-/// and n_r the window's valid pixels (the factor undoes the spread's bias for
-/// n_r independent samples); -1 below 2 samples. `out`: W * H values.
-void whiteNoiseSpreadInto(const PlanarImage& data, int r, float* out,
-                          int threads);
-
-/// As whiteNoiseSpreadInto() around the window's least-squares plane of f
-/// (each component fitted as a + b u + c v over the valid pixels at offsets
-/// (u, v) from x) instead of its mean:
-///   sigma_r(x) = sqrt(RSS_r(x) / (n_r(x) - 3)) / (1 - 1 / (9 (n_r - 3)))^1.5
+/// The noise level of f (3 planes, unit or 0 where missing) in the
+/// (2 r + 1)^2 window around (x, y), as white noise would read it, computed
+/// in double. Around the window's mean:
+///   sigma_r = s_r / sqrt(1 - 1 / n_r),
+/// s_r = sqrt(2 (1 - |sum f| / n_r)) the RMS spread around the mean and n_r
+/// the window's valid pixels (the factor undoes the spread's bias for n_r
+/// independent samples); -1 below 2 samples. With plane_residual, around
+/// the window's least-squares plane (each component fitted as a + b u + c v
+/// over the valid pixels at offsets (u, v) from (x, y)):
+///   sigma_r = sqrt(RSS_r / (n_r - 3)) / (1 - 1 / (9 (n_r - 3)))^1.5
 /// (the last factor: a chi's median over its RMS, since the median is read),
 /// so that a surface turning steadily (a cylinder, a sphere) reads its noise
 /// and not its bend; -1 where fewer than 4 valid pixels or pixels all on
 /// one line leave the plane undetermined.
-void planeResidualSpreadInto(const PlanarImage& data, int r, float* out,
-                             int threads);
-
-/// sigma_r of the window around (x, y) alone, under the mean model
-/// (whiteNoiseSpreadInto()) or around the plane (planeResidualSpreadInto()),
-/// computed in double.
 float windowSpreadAt(const PlanarImage& data, int r, int x, int y,
                      bool plane_residual);
 
@@ -95,11 +86,11 @@ struct NoiseEstimate {
 
 /// The estimate of f at radii base_radius, 2 base_radius, 4 base_radius, ...
 /// up to max_radius (max_radius itself the last one), read at the centres of
-/// noiseSampleStride()'s grid (windowSpreadAt()), each spread around
-/// the window's mean or, with plane_residual, around its least-squares plane
-/// (planeResidualSpreadInto()); an input whose base windows determine a plane
-/// at fewer than half of the centres it observes (a sparse input) is read
-/// around the mean. Buffers grown once per thread, then reused.
+/// noiseSampleStride()'s grid (windowSpreadAt()), each spread around the
+/// window's mean or, with plane_residual, around its least-squares plane; an
+/// input whose base windows determine a plane at fewer than half of the
+/// centres it observes (a sparse input) is read around the mean. Buffers grown
+/// once per thread, then reused.
 NoiseEstimate estimateNoise(const PlanarImage& data, int base_radius,
                             int max_radius, int threads,
                             bool plane_residual = false);
