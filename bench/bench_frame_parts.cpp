@@ -22,6 +22,8 @@
 
 #include "bench_util.h"
 #include "eval/synthetic.h"
+#include "normal_fusion/detail/dynamic_guidance.h"
+#include "normal_fusion/detail/kernel_backend.h"
 #include "normal_fusion/detail/noise_estimate.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
@@ -109,6 +111,8 @@ class PartsRun {
       {"refinement: gather + energy", {}, {}},
       {"noise estimate of both inputs, mean model, radius 4", {}, {}},
       {"noise estimate of both inputs, plane model, radius 4", {}, {}},
+      {"outer step: dynamic guidance reweight", {}, {}},
+      {"outer step: energy (fast backend)", {}, {}},
       {"live frame (StreamFuser::fuse, budget 33 ms)", {}, {}},
   };
   nf::SolverSettings settings_;
@@ -234,6 +238,22 @@ void PartsRun::frame(const nf::FusionProblem& problem,
       [&] {
         gathered.gather(level, iteration, active, threads);
         gathered.energy(settings_.huber_eps, settings_.penalty, threads);
+      });
+  // What closing a whole-image outer step adds: the guided weights of the
+  // new n0 and the energy under them.
+  in::DynamicGuidance guidance;
+  guidance.begin(level, level, in::guidanceTerms(settings_));
+  time(
+      12, [] {}, [&] { guidance.reweight(filled_normals, threads); });
+  guidance.end();
+  time(
+      13, [] {},
+      [&] {
+        in::EnergyTerms terms;
+        terms.huber_eps = settings_.huber_eps;
+        terms.penalty = settings_.penalty;
+        in::kernelBackend(settings_.backend)
+            .energy(level, terms, filled_normals, threads);
       });
   for (const bool plane : {false, true}) {
     time(

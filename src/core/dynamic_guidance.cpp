@@ -6,29 +6,46 @@
 #include <algorithm>
 #include <cmath>
 
+#include "normal_fusion/detail/multiversion.h"
+
 namespace normal_fusion {
 namespace internal {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-/// The guided weight of one link of image weight `w_img` whose normals are
-/// `a` and `b` (planes of three components, index ia and ib); adds the
-/// link's share of E to `correction`.
-inline float guidedLink(const GuidanceTerms& terms, float w_img,
-                        const float* const n[3], std::size_t ia, std::size_t ib,
-                        double& correction) {
-  const float k = terms.mu * std::max(0.0f, 1.0f - w_img);
-  if (k <= 0.0f) return w_img;
-  const float d0 = n[0][ib] - n[0][ia];
-  const float d1 = n[1][ib] - n[1][ia];
-  const float d2 = n[2][ib] - n[2][ia];
-  const float chord = std::sqrt(d0 * d0 + d1 * d1 + d2 * d2);
-  const float phi = guidanceKernel(chord, terms.scale);
-  const double eps = terms.huber_eps;
-  correction += k * (guidancePenalty(chord, terms.scale, eps) -
-                     static_cast<double>(phi) * huberPenalty(chord, eps));
-  return w_img + k * phi;
+/// One row's links in one direction (the other end `next` values on):
+/// w = w_img + k phi(|n_q - n_p|) with k = mu (1 - w_img), or 0 where an end
+/// is unobserved; returns the row's share of the correction, sum k (Psi -
+/// phi huber). Branch-free, so that it vectorises.
+NF_MULTIVERSION
+double guidedRow(int count, std::size_t next, const float* __restrict n0,
+                 const float* __restrict n1, const float* __restrict n2,
+                 const float* __restrict img, const float* __restrict gain,
+                 float* __restrict w, GuidancePenaltyTerms psi) {
+  double correction = 0.0;
+  const double inv_scale = 1.0 / psi.scale;
+#pragma omp simd reduction(+ : correction)
+  for (int x = 0; x < count; ++x) {
+    const float d0 = n0[x + next] - n0[x];
+    const float d1 = n1[x + next] - n1[x];
+    const float d2 = n2[x + next] - n2[x];
+    const double t =
+        std::sqrt(static_cast<double>(d0 * d0 + d1 * d1 + d2 * d2));
+    const double xs = t * inv_scale;
+    // phi = exp(-(t / s)^2), once for the weight and for Psi.
+    const double phi = expNonPositive(-xs * xs);
+    w[x] = img[x] + gain[x] * static_cast<float>(phi);
+    correction += gain[x] * psi.correction(t, phi);
+  }
+  return correction;
+}
+
+/// The links past the last column or row couple nothing (d = 0): phi = 1.
+void outerLinks(int count, const float* img, float* w, float mu) {
+  for (int x = 0; x < count; ++x) {
+    w[x] = img[x] + mu * std::max(0.0f, 1.0f - img[x]);
+  }
 }
 
 }  // namespace
@@ -71,6 +88,24 @@ void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
       if (c[i] > 0.0f) observed_[i] = 1;
     }
   }
+  // k = mu (1 - w_img) of each link inside the image, 0 where an end is
+  // unobserved (the link keeps w_img there).
+  link_gain_.resize(finest.width, finest.height, 2);
+  link_gain_.resizeKeepingCapacity(level.width, level.height, 2);
+  const int W = level.width, H = level.height;
+  const float* img_h = image_weight_.plane(0);
+  const float* img_v = image_weight_.plane(1);
+  float* k_h = link_gain_.plane(0);
+  float* k_v = link_gain_.plane(1);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      const bool h = x + 1 < W && observed_[i] && observed_[i + 1];
+      const bool v = y + 1 < H && observed_[i] && observed_[i + W];
+      k_h[i] = h ? terms.mu * std::max(0.0f, 1.0f - img_h[i]) : 0.0f;
+      k_v[i] = v ? terms.mu * std::max(0.0f, 1.0f - img_v[i]) : 0.0f;
+    }
+  }
 }
 
 double DynamicGuidance::reweight(const PlanarImage& normals, int threads) {
@@ -83,30 +118,23 @@ double DynamicGuidance::reweight(const PlanarImage& normals, int threads) {
   float* w_h = level.edge_weight.plane(0);
   float* w_v = level.edge_weight.plane(1);
   const GuidanceTerms terms = terms_;
-  const unsigned char* observed = observed_.data();
+  const GuidancePenaltyTerms psi(terms.scale, terms.huber_eps);
+  const float* k_h = link_gain_.plane(0);
+  const float* k_v = link_gain_.plane(1);
   double* sums = row_sums_.data();
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
-    double correction = 0.0;
     const std::size_t row = static_cast<std::size_t>(y) * W;
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = row + x;
-      // The links past the last column and row couple nothing (d = 0).
-      // Links with an unobserved end keep w_img (mu = 0 there).
-      if (x + 1 >= W) {
-        w_h[i] = img_h[i] + terms.mu * std::max(0.0f, 1.0f - img_h[i]);
-      } else if (observed[i] && observed[i + 1]) {
-        w_h[i] = guidedLink(terms, img_h[i], n, i, i + 1, correction);
-      } else {
-        w_h[i] = img_h[i];
-      }
-      if (y + 1 >= H) {
-        w_v[i] = img_v[i] + terms.mu * std::max(0.0f, 1.0f - img_v[i]);
-      } else if (observed[i] && observed[i + W]) {
-        w_v[i] = guidedLink(terms, img_v[i], n, i, i + W, correction);
-      } else {
-        w_v[i] = img_v[i];
-      }
+    const float* n_row[3] = {n[0] + row, n[1] + row, n[2] + row};
+    double correction = guidedRow(W - 1, 1, n_row[0], n_row[1], n_row[2],
+                                  img_h + row, k_h + row, w_h + row, psi);
+    outerLinks(1, img_h + row + W - 1, w_h + row + W - 1, terms.mu);
+    if (y + 1 < H) {
+      correction +=
+          guidedRow(W, static_cast<std::size_t>(W), n_row[0], n_row[1],
+                    n_row[2], img_v + row, k_v + row, w_v + row, psi);
+    } else {
+      outerLinks(W, img_v + row, w_v + row, terms.mu);
     }
     sums[y] = correction;
   }
@@ -125,8 +153,8 @@ void DynamicGuidance::end() {
 }
 
 std::size_t DynamicGuidance::bytesHeld() const {
-  return image_weight_.bytesHeld() + internal::bytesHeld(row_sums_) +
-         internal::bytesHeld(observed_);
+  return image_weight_.bytesHeld() + link_gain_.bytesHeld() +
+         internal::bytesHeld(row_sums_) + internal::bytesHeld(observed_);
 }
 
 }  // namespace internal

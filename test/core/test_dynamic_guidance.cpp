@@ -127,6 +127,36 @@ TEST(GuidancePenalty, IsTheIntegralOfTheKernelOverTheHuberPenalty) {
   }
 }
 
+// The reweighting's Psi and its links' correction, from the kernel's value
+// and without erf, stay within what the erf approximation allows (1.5e-7
+// at t and at eps, times s sqrt(pi) / 2) of the exact ones; the branch-free
+// exponential they are given is exact to 1e-14.
+TEST(GuidancePenalty, FromTheKernelMatchesTheExactPenalty) {
+  for (double eps : {0.0, 0.01, 0.05, 0.3}) {
+    for (double scale : {0.087, 0.2, 0.7}) {
+      const internal::GuidancePenaltyTerms psi(scale, eps);
+      const double bound = 2.0 * 1.5e-7 * 0.8862269254527580 * scale;
+      for (int i = 0; i <= 4000; ++i) {
+        const double t = 2.0 * i / 4000.0;
+        const double x = t / scale;
+        const double e = internal::expNonPositive(-x * x);
+        ASSERT_NEAR(e, std::exp(-x * x), 1e-14 * std::exp(-x * x));
+        const double exact = internal::guidancePenalty(t, scale, eps);
+        ASSERT_NEAR(psi.penalty(t, e), exact, bound)
+            << "eps " << eps << " s " << scale << " t " << t;
+        const double exact_correction =
+            exact - std::exp(-x * x) * internal::huberPenalty(t, eps);
+        ASSERT_NEAR(psi.correction(t, e), exact_correction, bound)
+            << "eps " << eps << " s " << scale << " t " << t;
+      }
+    }
+  }
+  for (double t : {0.0, -1e-3, -0.5, -3.0, -40.0, -300.0, -690.0}) {
+    ASSERT_NEAR(internal::expNonPositive(t), std::exp(t), 1e-14 * std::exp(t))
+        << t;
+  }
+}
+
 // Links with an end in a hole (no input there) keep the image weight.
 TEST(DynamicGuidance, WeightsFollowTheNormalsAndTheImageWeightsComeBack) {
   internal::PreparedLevel level;
