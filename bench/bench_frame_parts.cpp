@@ -113,6 +113,9 @@ class PartsRun {
       {"noise estimate of both inputs, plane model, radius 4", {}, {}},
       {"outer step: dynamic guidance reweight", {}, {}},
       {"outer step: energy (fast backend)", {}, {}},
+      {"warp: rotation, duals rotated (kRotate: a state still converging)",
+       {},
+       {}},
       {"live frame (StreamFuser::fuse, budget 33 ms)", {}, {}},
   };
   nf::SolverSettings settings_;
@@ -147,6 +150,13 @@ void PartsRun::frame(const nf::FusionProblem& problem,
       [&] {
         nf::warpStateByRotation(work, problem.K, R_cur_prev, warp_scratch,
                                 threads, nf::DualWarp::kReset);
+      });
+  nf::SolverState rotated;
+  time(
+      14, [&] { rotated = state; },
+      [&] {
+        nf::warpStateByRotation(rotated, problem.K, R_cur_prev, warp_scratch,
+                                threads, nf::DualWarp::kRotate);
       });
   nf::Pose T_cur_prev;
   T_cur_prev.R = R_cur_prev;

@@ -90,27 +90,14 @@ inline void rotate(const float* R, const float s[3], float out[3]) {
   }
 }
 
-/// Bilinear blend of 3 planes at the corners i00, i00 + dx | i00 + dy,
-/// i00 + dy + dx (weights tx, ty), rotated by R: out = R blend.
-inline void bilinearRotate(const float* const src[3], int i00, int dx, int dy,
-                           float tx, float ty, const float* R, float out[3]) {
-  float s[3];
-  for (int c = 0; c < 3; ++c) {
-    const float* p = src[c];
-    s[c] = blendCorners(p[i00], p[i00 + dx], p[i00 + dy], p[i00 + dy + dx], tx,
-                        ty);
-  }
-  rotate(R, s, out);
-}
-
 /// Pixels per chunk of warpNormalsChunk().
 constexpr int kChunk = 64;
 
 /// Where a chunk of at most kChunk pixels of one row comes from, and their
 /// warped normals: internal::PreviousPixel::at() and blendable() per pixel,
-/// then bilinearRotate()'s blend, in three passes without branches that GCC
-/// vectorises (positions; the blend's four corners gathered; blend test,
-/// blend, rotation and normalization). The corners that carry weight in
+/// then the corners' bilinear blend, rotated, in three passes without branches
+/// that GCC vectorises (positions; the blend's four corners gathered; blend
+/// test, blend, rotation and normalization). The corners that carry weight in
 /// blendable() are among the four gathered ones, so they are selected from
 /// them rather than loaded again. Writes n_cur (NaN where no prediction)
 /// and, per pixel, the source's first corner (-1: none), its steps to the
@@ -191,7 +178,7 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
     const bool ae = dot(a, e) >= cos_blend, bc = dot(b, c) >= cos_blend;
     const bool be = dot(b, e) >= cos_blend, ce = dot(c, e) >= cos_blend;
     const bool blend = ab & ac & ae & bc & be & ce;
-    // The blend (bilinearRotate()), rotated into the current frame.
+    // The bilinear blend, rotated into the current frame.
     float s[3];
     for (int ch = 0; ch < 3; ++ch) {
       s[ch] = blendCorners(p00[ch][j], p01[ch][j], p10[ch][j], p11[ch][j],
@@ -206,6 +193,38 @@ void warpNormalsChunk(const double* A, int W, int H, int y, int x_begin,
     out1[j] = ok ? n[1] / safe_len : nan;
     out2[j] = ok ? n[2] / safe_len : nan;
     corner[j] = ok ? corner[j] : -1;
+  }
+}
+
+/// One dual group (3 planes) over a chunk at the positions that
+/// warpNormalsChunk() found: the corners' bilinear blend, rotated, and zero
+/// where there is no prediction (corner -1, read at a safe index), without
+/// branches, so that GCC vectorises it.
+NF_MULTIVERSION
+void warpDualChunk(int count, const float* __restrict from0,
+                   const float* __restrict from1, const float* __restrict from2,
+                   const int* __restrict corner, const int* __restrict step_x,
+                   const int* __restrict step_y, const float* __restrict t_x,
+                   const float* __restrict t_y, const float* R,
+                   float* __restrict to0, float* __restrict to1,
+                   float* __restrict to2) {
+  const float* const src[3] = {from0, from1, from2};
+  for (int j = 0; j < count; ++j) {
+    const bool ok = corner[j] >= 0;
+    const int i00 = ok ? corner[j] : 0;
+    const int dx = step_x[j], dy = step_y[j];
+    float s[3];
+    for (int c = 0; c < 3; ++c) {
+      const float* p = src[c];
+      s[c] = blendCorners(p[i00], p[i00 + dx], p[i00 + dy], p[i00 + dy + dx],
+                          t_x[j], t_y[j]);
+    }
+    float n[3];
+    rotate(R, s, n);
+    const float mask = ok ? 1.0f : 0.0f;
+    to0[j] = mask * n[0];
+    to1[j] = mask * n[1];
+    to2[j] = mask * n[2];
   }
 }
 
@@ -269,16 +288,10 @@ void warpStateByRotation(SolverState& state, const CameraIntrinsics& K,
       for (int g = 0; g < rotated_groups; ++g) {
         const PlanarImage& src = dual_group(state, g);
         PlanarImage& dst = dual_group(scratch, g);
-        const float* from[3] = {src.data(), src.data() + N, src.data() + 2 * N};
-        float* to[3] = {dst.data(), dst.data() + N, dst.data() + 2 * N};
-        for (int j = 0; j < count; ++j) {
-          float p[3] = {0.0f, 0.0f, 0.0f};
-          if (corner[j] >= 0) {
-            bilinearRotate(from, corner[j], step_x[j], step_y[j], t_x[j],
-                           t_y[j], Rf, p);
-          }
-          for (int c = 0; c < 3; ++c) to[c][row + j] = p[c];
-        }
+        float* to = dst.data() + row;
+        warpDualChunk(count, src.data(), src.data() + N, src.data() + 2 * N,
+                      corner, step_x, step_y, t_x, t_y, Rf, to, to + N,
+                      to + 2 * N);
       }
     }
   }
