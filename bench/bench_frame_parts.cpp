@@ -113,6 +113,7 @@ class PartsRun {
       {"noise estimate of both inputs, plane model, radius 4", {}, {}},
       {"outer step: dynamic guidance reweight", {}, {}},
       {"outer step: energy (fast backend)", {}, {}},
+      {"level start: dynamic guidance begin", {}, {}},
       {"warp: rotation, duals rotated (kRotate: a state still converging)",
        {},
        {}},
@@ -153,7 +154,7 @@ void PartsRun::frame(const nf::FusionProblem& problem,
       });
   nf::SolverState rotated;
   time(
-      14, [&] { rotated = state; },
+      15, [&] { rotated = state; },
       [&] {
         nf::warpStateByRotation(rotated, problem.K, R_cur_prev, warp_scratch,
                                 threads, nf::DualWarp::kRotate);
@@ -252,7 +253,11 @@ void PartsRun::frame(const nf::FusionProblem& problem,
   // What closing a whole-image outer step adds: the guided weights of the
   // new n0 and the energy under them.
   in::DynamicGuidance guidance;
-  guidance.begin(level, level, in::guidanceTerms(settings_));
+  time(
+      14, [&] { guidance.end(); },
+      [&] {
+        guidance.begin(level, level, in::guidanceTerms(settings_), threads);
+      });
   time(
       12, [] {}, [&] { guidance.reweight(filled_normals, threads); });
   guidance.end();

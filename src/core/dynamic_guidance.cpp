@@ -61,49 +61,68 @@ GuidanceTerms guidanceTerms(const SolverSettings& settings) {
 }
 
 void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
-                            const GuidanceTerms& terms) {
+                            const GuidanceTerms& terms, int threads) {
   level_ = &level;
   terms_ = terms;
   // Sized for the finest level first, so that the pyramid's smaller levels
   // and the frames after reuse the buffers.
   image_weight_.resize(finest.width, finest.height, 2);
   image_weight_.resizeKeepingCapacity(level.width, level.height, 2);
+  link_gain_.resize(finest.width, finest.height, 2);
+  link_gain_.resizeKeepingCapacity(level.width, level.height, 2);
   // A much larger frame's buffers are given back (PlanarImage's rule).
   releaseIfOversized(row_sums_, static_cast<std::size_t>(finest.height));
   releaseIfOversized(observed_, finest.edge_weight.pixelCount());
   if (row_sums_.size() < static_cast<std::size_t>(finest.height)) {
     row_sums_.resize(finest.height);
   }
-  const std::size_t values = 2 * level.edge_weight.pixelCount();
-  std::copy(level.edge_weight.data(), level.edge_weight.data() + values,
-            image_weight_.data());
   const std::size_t pixels = level.edge_weight.pixelCount();
   if (observed_.capacity() < finest.edge_weight.pixelCount()) {
     observed_.reserve(finest.edge_weight.pixelCount());
   }
-  observed_.assign(pixels, 0);
-  for (int l = 0; l < level.num_inputs; ++l) {
-    const float* c = level.data_weight[l].plane(0);
-    for (std::size_t i = 0; i < pixels; ++i) {
-      if (c[i] > 0.0f) observed_[i] = 1;
-    }
-  }
-  // k = mu (1 - w_img) of each link inside the image, 0 where an end is
-  // unobserved (the link keeps w_img there).
-  link_gain_.resize(finest.width, finest.height, 2);
-  link_gain_.resizeKeepingCapacity(level.width, level.height, 2);
-  const int W = level.width, H = level.height;
-  const float* img_h = image_weight_.plane(0);
-  const float* img_v = image_weight_.plane(1);
+  observed_.resize(pixels);
+  const int W = level.width, H = level.height, L = level.num_inputs;
+  const float* w_h = level.edge_weight.plane(0);
+  const float* w_v = level.edge_weight.plane(1);
+  float* img_h = image_weight_.plane(0);
+  float* img_v = image_weight_.plane(1);
   float* k_h = link_gain_.plane(0);
   float* k_v = link_gain_.plane(1);
+  float* observed = observed_.data();
+  const float mu = terms.mu;
+  // Observed: some input has weight at the pixel (1, else 0).
+#pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    float* o = observed + row;
+    for (int x = 0; x < W; ++x) o[x] = 0.0f;
+    for (int l = 0; l < L; ++l) {
+      const float* c = level.data_weight[l].plane(0) + row;
+      for (int x = 0; x < W; ++x) o[x] = c[x] > 0.0f ? 1.0f : o[x];
+    }
+  }
+  // The image weights kept, and k = mu (1 - w_img) of each link inside the
+  // image, 0 where an end is unobserved (the link keeps w_img there) and on
+  // the links past the last column and row.
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    const float* o = observed + row;
+    const float* o_below = y + 1 < H ? o + W : nullptr;
     for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const bool h = x + 1 < W && observed_[i] && observed_[i + 1];
-      const bool v = y + 1 < H && observed_[i] && observed_[i + W];
-      k_h[i] = h ? terms.mu * std::max(0.0f, 1.0f - img_h[i]) : 0.0f;
-      k_v[i] = v ? terms.mu * std::max(0.0f, 1.0f - img_v[i]) : 0.0f;
+      img_h[row + x] = w_h[row + x];
+      img_v[row + x] = w_v[row + x];
+    }
+    for (int x = 0; x + 1 < W; ++x) {
+      k_h[row + x] =
+          o[x] * o[x + 1] * mu * std::max(0.0f, 1.0f - img_h[row + x]);
+    }
+    k_h[row + W - 1] = 0.0f;
+    for (int x = 0; x < W; ++x) {
+      k_v[row + x] =
+          o_below == nullptr
+              ? 0.0f
+              : o[x] * o_below[x] * mu * std::max(0.0f, 1.0f - img_v[row + x]);
     }
   }
 }

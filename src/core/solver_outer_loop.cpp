@@ -57,7 +57,7 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
   if (settings_.dynamic_guidance > 0.0) {
     guidance = &guidance_;
     guidance->begin(levels_[static_cast<std::size_t>(&level - levels_.data())],
-                    levels_[0], internal::guidanceTerms(settings_));
+                    levels_[0], internal::guidanceTerms(settings_), threads_);
     correction = guidance->reweight(s.n0, threads_);
   }
   // best: the weighted E at n0, which a step must not exceed; reached: E.

@@ -144,7 +144,7 @@ class DynamicGuidance {
   /// Keeps the image weights of `level` (`finest`: the solve's finest level,
   /// which the buffers are sized for).
   void begin(PreparedLevel& level, const PreparedLevel& finest,
-             const GuidanceTerms& terms);
+             const GuidanceTerms& terms, int threads = 1);
   /// The guided weights at `normals` (unit, the level's size) into the
   /// level's edge weights; returns the guidance's share of E that the
   /// weighted E lacks at `normals`: sum over links of mu (1 - w_img)
@@ -163,7 +163,7 @@ class DynamicGuidance {
   /// Per pixel: some input observes it (c_l > 0). A link with an
   /// unobserved end keeps w_img: there the normals are the smoothing's own
   /// fill-in, and only the image tells where it may bend.
-  std::vector<unsigned char> observed_;
+  std::vector<float> observed_;   ///< begin(): 1 where some input has weight
   std::vector<double> row_sums_;  ///< reweight(): one partial sum per row
 };
 
