@@ -24,13 +24,6 @@ struct GuidanceTerms {
 /// The terms of `settings`; mu = 0 when the guidance is off.
 GuidanceTerms guidanceTerms(const SolverSettings& settings);
 
-/// The normals' weight of a link whose normals differ by `chord`:
-/// phi = exp(-(chord / s)^2) (Welsch).
-inline float guidanceKernel(float chord, float scale) {
-  const float x = chord / scale;
-  return std::exp(-x * x);
-}
-
 /// Psi_s(t) = int_0^t phi(u) huber_eps'(u) du: the bounded penalty whose
 /// derivative with respect to huber_eps(t) is phi(t), so that the guided
 /// weight is its majorizer's weight (docs/method.md#the-energy).
