@@ -108,7 +108,6 @@ void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
   for (int y = 0; y < H; ++y) {
     const std::size_t row = static_cast<std::size_t>(y) * W;
     const float* o = observed + row;
-    const float* o_below = y + 1 < H ? o + W : nullptr;
     for (int x = 0; x < W; ++x) {
       img_h[row + x] = w_h[row + x];
       img_v[row + x] = w_v[row + x];
@@ -118,11 +117,14 @@ void DynamicGuidance::begin(PreparedLevel& level, const PreparedLevel& finest,
           o[x] * o[x + 1] * mu * std::max(0.0f, 1.0f - img_h[row + x]);
     }
     k_h[row + W - 1] = 0.0f;
+    if (y + 1 == H) {
+      std::fill(k_v + row, k_v + row + W, 0.0f);
+      continue;
+    }
+    const float* o_below = o + W;
     for (int x = 0; x < W; ++x) {
       k_v[row + x] =
-          o_below == nullptr
-              ? 0.0f
-              : o[x] * o_below[x] * mu * std::max(0.0f, 1.0f - img_v[row + x]);
+          o[x] * o_below[x] * mu * std::max(0.0f, 1.0f - img_v[row + x]);
     }
   }
 }
