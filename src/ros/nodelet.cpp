@@ -5,6 +5,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <sstream>
 #include <type_traits>
@@ -113,6 +114,12 @@ void writeConfigMessage(const ParameterMap& params,
 }  // namespace
 
 NormalFusionNodelet::~NormalFusionNodelet() {
+  {
+    std::lock_guard<std::mutex> lock(watch_mutex_);
+    watch_stop_ = true;
+  }
+  watch_cv_.notify_all();
+  if (shutdown_watch_.joinable()) shutdown_watch_.join();
   // Unsubscribed first: shutdown() waits for a callback under way, so that
   // none runs on the members destroyed after this body.
   timer_.stop();
@@ -179,6 +186,7 @@ void NormalFusionNodelet::onInit() {
   publishParameterRanges();
 
   worker_ = std::thread([this] { workerLoop(); });
+  shutdown_watch_ = std::thread([this] { shutdownWatchLoop(); });
 
   setupDiagnostics();
 
@@ -494,6 +502,24 @@ CameraMotionLookup NormalFusionNodelet::applyNewSettings() {
                              ros::Duration(tf_timeout));
     return lookup(frame, previous, current, T_cur_prev, reason);
   });
+}
+
+void NormalFusionNodelet::shutdownWatchLoop() {
+  // roscpp offers no shutdown callback; a 10 ms poll costs nothing and keeps
+  // the delay well below the time roslaunch gives a node to end.
+  std::unique_lock<std::mutex> lock(watch_mutex_);
+  while (!watch_cv_.wait_for(lock, std::chrono::milliseconds(10),
+                             [this] { return watch_stop_; })) {
+    if (ros::isShuttingDown() || !ros::ok()) {
+      {
+        std::lock_guard<std::mutex> work_lock(work_mutex_);
+        stop_ = true;
+      }
+      work_cv_.notify_all();
+      pipeline_->requestCancel();
+      return;
+    }
+  }
 }
 
 void NormalFusionNodelet::workerLoop() {

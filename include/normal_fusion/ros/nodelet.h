@@ -111,6 +111,15 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   std::thread worker_;
   std::unique_ptr<FusionPipeline> pipeline_;  ///< used by the worker only
 
+  // Cancels the solve as soon as roscpp begins to shut down, long before the
+  // manager destroys the nodelet: a solve left running holds every core while
+  // the rest of the process shuts down.
+  void shutdownWatchLoop();
+  std::mutex watch_mutex_;
+  std::condition_variable watch_cv_;
+  bool watch_stop_ = false;
+  std::thread shutdown_watch_;
+
   // Settings from dynamic_reconfigure, picked up by the worker before a set.
   std::mutex settings_mutex_;
   bool settings_changed_ = false;
