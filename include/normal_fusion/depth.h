@@ -81,8 +81,9 @@ struct DepthNormalSettings {
   /// (Khoshelham and Elberink 2012), 0.0025 a typical structured-light or
   /// stereo camera; >= 0 (0: no noise term in tau, sigma_n = 0).
   double noise_coefficient = 0.0025;
-  /// s0 of the confidence (radians); > 0.
-  double normal_sigma_scale = 0.5;
+  /// s0 of the confidence (radians); > 0. Wide enough that normals of far
+  /// or noisy depth keep part of their weight instead of none.
+  double normal_sigma_scale = 2.0;
   /// r of the confidence's edge factor (pixels); >= 0, 0 = off.
   double edge_distance = 3.0;
   /// Threads for the rows (the results do not depend on it); 1 .. 256.

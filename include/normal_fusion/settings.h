@@ -127,6 +127,13 @@ struct SolverSettings {
   /// rather than around their mean: a curved surface's steady turn is not
   /// counted as noise, so its gain stays near 1. false = around the mean.
   bool noise_plane_residual = settings_default::noise_plane_residual;
+  /// An input's confidence (NormalInput::confidence) divided by its mean
+  /// over the pixels it observes: it then only ranks that input's
+  /// observations, and the level of its data term stays lambda times its
+  /// weight (and its noise estimate's), as without a confidence. false = the
+  /// confidence multiplies the data weight as it is, so a producer's
+  /// confidence that is low everywhere lowers the whole input.
+  bool confidence_relative = settings_default::confidence_relative;
   /// Edge weights of the links between two pixels that no input observes are
   /// multiplied by this, in (0, 1] (1 = off): a pixel next to an
   /// observed surface and inside a hole (a dropout, a silhouette's rim)

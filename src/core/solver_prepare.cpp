@@ -68,6 +68,27 @@ bool usesDataHuber(const SolverSettings& settings) {
 
 namespace {
 
+/// c <- c w / mean(c | c > 0), w = lambda times the input's weight: the
+/// confidence's mean over the observed pixels becomes 1, so that it ranks
+/// the input's observations and leaves the level of its data term to w.
+void normalizeConfidence(PlanarImage& data_weight, float global_weight,
+                         int threads) {
+  float* c = data_weight.plane(0);
+  const long pixels = static_cast<long>(data_weight.pixelCount());
+  double sum = 0.0;
+  long observed = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : sum, observed)
+  for (long i = 0; i < pixels; ++i) {
+    sum += c[i];
+    observed += c[i] > 0.0f ? 1 : 0;
+  }
+  if (observed == 0 || !(sum > 0.0)) return;
+  const float factor = static_cast<float>(static_cast<double>(global_weight) *
+                                          static_cast<double>(observed) / sum);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (long i = 0; i < pixels; ++i) c[i] *= factor;
+}
+
 /// Input l of the problem into the level's f_l and c_l (the level's size and
 /// K set): converted to the optical frame row by row, then in hard
 /// visibility mode the observations facing away from the camera dropped.
@@ -109,6 +130,9 @@ void convertInput(const NormalInput& input, const SolverSettings& settings,
         }
       }
     }
+  }
+  if (conf_in != nullptr && settings.confidence_relative) {
+    normalizeConfidence(level.data_weight[l], global_weight, threads);
   }
 }
 

@@ -114,58 +114,81 @@ TEST(PreparedData, ConversionOfEveryKindOfValue) {
     }
   }
   problem.inputs = {input};
-  for (VisibilityMode mode : {VisibilityMode::kSoft, VisibilityMode::kHard}) {
-    SolverSettings settings;
-    settings.lambda = 0.5;
-    settings.visibility = mode;
-    settings.data_eps_local = 0.0;
-    settings.density_power = 0.0;
-    const internal::PreparedLevel level =
-        internal::prepareFinest(problem, settings);
-    int valid = 0;
-    for (int y = 0; y < H; ++y) {
-      for (int x = 0; x < W; ++x) {
-        // Oracle: usable = finite and not (nearly) zero; f = M n / |M n|;
-        // c = lambda * weight * clamp(confidence, 0, 1), a non-finite
-        // confidence counting 0; in hard mode 0 where f faces away (r . f >
-        // 0); f = 0 wherever c = 0.
-        const float* n = normals[(x + 3 * y) % 8];
-        const double s =
-            double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2];
-        const bool usable = std::isfinite(s) && s > 1e-12 && s < 1e30;
-        float conf = confidences[(2 * x + y) % 8];
-        conf =
-            std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
-        double f[3] = {0.0, 0.0, 0.0};
-        double c = 0.0;
-        if (usable) {
-          const auto& M = input.orientation.M;
-          double len = 0.0;
-          for (int r = 0; r < 3; ++r) {
-            f[r] = double(M[3 * r]) * n[0] + double(M[3 * r + 1]) * n[1] +
-                   double(M[3 * r + 2]) * n[2];
-            len += f[r] * f[r];
+  for (const bool relative : {false, true}) {
+    for (VisibilityMode mode : {VisibilityMode::kSoft, VisibilityMode::kHard}) {
+      SolverSettings settings;
+      settings.lambda = 0.5;
+      settings.visibility = mode;
+      settings.data_eps_local = 0.0;
+      settings.density_power = 0.0;
+      settings.confidence_relative = relative;
+      const internal::PreparedLevel level =
+          internal::prepareFinest(problem, settings);
+      std::vector<double> expected_c(static_cast<std::size_t>(W) * H, 0.0);
+      std::vector<double> expected_f(3 * expected_c.size(), 0.0);
+      double sum_c = 0.0;
+      int valid = 0;
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          // Oracle: usable = finite and not (nearly) zero; f = M n / |M n|;
+          // c = lambda * weight * clamp(confidence, 0, 1), a non-finite
+          // confidence counting 0; in hard mode 0 where f faces away (r . f >
+          // 0); f = 0 wherever c = 0.
+          const float* n = normals[(x + 3 * y) % 8];
+          const double s =
+              double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2];
+          const bool usable = std::isfinite(s) && s > 1e-12 && s < 1e30;
+          float conf = confidences[(2 * x + y) % 8];
+          conf =
+              std::isfinite(conf) ? std::min(std::max(conf, 0.0f), 1.0f) : 0.0f;
+          double f[3] = {0.0, 0.0, 0.0};
+          double c = 0.0;
+          if (usable) {
+            const auto& M = input.orientation.M;
+            double len = 0.0;
+            for (int r = 0; r < 3; ++r) {
+              f[r] = double(M[3 * r]) * n[0] + double(M[3 * r + 1]) * n[1] +
+                     double(M[3 * r + 2]) * n[2];
+              len += f[r] * f[r];
+            }
+            for (double& v : f) v /= std::sqrt(len);
+            c = 0.5 * 2.0 * conf;
+            if (mode == VisibilityMode::kHard) {
+              const double ray[3] = {(x - (W - 1) / 2.0) / 20.0,
+                                     (y - (H - 1) / 2.0) / 20.0, 1.0};
+              if (ray[0] * f[0] + ray[1] * f[1] + ray[2] * f[2] > 0.0) c = 0.0;
+            }
           }
-          for (double& v : f) v /= std::sqrt(len);
-          c = 0.5 * 2.0 * conf;
-          if (mode == VisibilityMode::kHard) {
-            const double ray[3] = {(x - (W - 1) / 2.0) / 20.0,
-                                   (y - (H - 1) / 2.0) / 20.0, 1.0};
-            if (ray[0] * f[0] + ray[1] * f[1] + ray[2] * f[2] > 0.0) c = 0.0;
-          }
-        }
-        if (!(c > 0.0)) f[0] = f[1] = f[2] = c = 0.0;
-        valid += c > 0.0 ? 1 : 0;
-        EXPECT_NEAR(level.data_weight[0].at(0, y, x), c, 1e-6) << x << "," << y;
-        for (int k = 0; k < 3; ++k) {
-          EXPECT_NEAR(level.data[0].at(k, y, x), f[k], 1e-6)
-              << x << "," << y << " component " << k;
+          if (!(c > 0.0)) f[0] = f[1] = f[2] = c = 0.0;
+          valid += c > 0.0 ? 1 : 0;
+          sum_c += c;
+          const std::size_t i = static_cast<std::size_t>(y) * W + x;
+          expected_c[i] = c;
+          for (int k = 0; k < 3; ++k) expected_f[3 * i + k] = f[k];
         }
       }
+      // Relative: c times lambda * weight / (the mean of c where c > 0).
+      const double scale = relative ? 0.5 * 2.0 * valid / sum_c : 1.0;
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * W + x;
+          EXPECT_NEAR(level.data_weight[0].at(0, y, x), scale * expected_c[i],
+                      1e-6)
+              << x << "," << y << (relative ? " relative" : "");
+          for (int k = 0; k < 3; ++k) {
+            EXPECT_NEAR(level.data[0].at(k, y, x), expected_f[3 * i + k], 1e-6)
+                << x << "," << y << " component " << k;
+          }
+        }
+      }
+      EXPECT_EQ(level.valid_pixels, valid);
+      EXPECT_GT(valid, 0);
+      EXPECT_LT(valid, W * H);
+      // The confidences are not all equal, so relative changes the weights.
+      if (relative) {
+        EXPECT_GT(std::abs(scale - 1.0), 0.1);
+      }
     }
-    EXPECT_EQ(level.valid_pixels, valid);
-    EXPECT_GT(valid, 0);
-    EXPECT_LT(valid, W * H);
   }
 }
 
@@ -276,6 +299,51 @@ TEST(HoleLinks, OnlyLinksInsideAHoleAreWeakened) {
           << x << "," << y;
     }
   }
+}
+
+/// confidence_relative: a confidence of 0.1 and 0.3 in two halves becomes
+/// 0.5 and 1.5 (mean 1 over the observed pixels), so the input keeps its
+/// level and the halves their ratio; a pixel of confidence 0 stays out; as
+/// it is, the confidence scales the weight.
+TEST(PreparedData, RelativeConfidenceRanksAndKeepsTheLevel) {
+  const int W = 20, H = 10;
+  NormalMap gt;
+  FusionProblem problem = test::twoPlaneScene(W, H, &gt);
+  NormalInput input;
+  input.normals = gt;
+  input.weight = 2.0;
+  input.confidence.resize(W, H, 1);
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      input.confidence.at(0, y, x) = x < W / 2 ? 0.1f : 0.3f;
+    }
+  }
+  input.confidence.at(0, 3, 3) = 0.0f;
+  // The mean over the other pixels stays 0.2: one pixel of each half out.
+  input.confidence.at(0, 3, W - 3) = 0.0f;
+  problem.inputs = {input};
+  SolverSettings settings;
+  settings.lambda = 0.5;
+  settings.data_eps_local = 0.0;
+  settings.density_power = 0.0;
+  settings.noise_radius = 0;
+  settings.confidence_relative = false;
+  const internal::PreparedLevel as_is =
+      internal::prepareFinest(problem, settings);
+  EXPECT_NEAR(as_is.data_weight[0].at(0, 5, 2), 0.1f, 1e-6f);
+  EXPECT_NEAR(as_is.data_weight[0].at(0, 5, W - 2), 0.3f, 1e-6f);
+  settings.confidence_relative = true;
+  const internal::PreparedLevel relative =
+      internal::prepareFinest(problem, settings);
+  EXPECT_NEAR(relative.data_weight[0].at(0, 5, 2), 0.5f, 1e-5f);
+  EXPECT_NEAR(relative.data_weight[0].at(0, 5, W - 2), 1.5f, 1e-5f);
+  EXPECT_EQ(relative.data_weight[0].at(0, 3, 3), 0.0f);
+  EXPECT_EQ(relative.data_weight[0].at(0, 3, W - 3), 0.0f);
+  // Without a confidence the setting changes nothing.
+  problem.inputs[0].confidence = ScalarMap();
+  const internal::PreparedLevel none =
+      internal::prepareFinest(problem, settings);
+  EXPECT_NEAR(none.data_weight[0].at(0, 5, 2), 1.0f, 1e-6f);
 }
 
 }  // namespace

@@ -80,7 +80,9 @@ TEST(Solver, WarmStartRefinementSolvesTheUnknownPixels) {
   // Columns 27 - 36 and 0 - 3 (the band, the strip and 1 pixel around
   // each), 48 rows.
   EXPECT_EQ(with.refined_pixels, 14 * 48);
-  EXPECT_EQ(with.refine_iterations, 100);
+  // All 100, or a converged stop once at least half of them ran.
+  EXPECT_GE(with.refine_iterations, 50);
+  EXPECT_LE(with.refine_iterations, 100);
   EXPECT_EQ(without.refined_pixels, 0);
   EXPECT_LE(with.final_energy, without.final_energy);
   const double err_with = test::meanSquaredError(refined, converged.normals);
