@@ -116,9 +116,10 @@ int main(int argc, char** argv) {
       o.width, o.height, o.threads, o.budget_ms, o.cold_start_budget_ms,
       o.cold_filter_radius, period_ms);
   std::printf(
-      "| frame | frame ms | sets dropped meanwhile | converging | whole-image "
-      "its (rejected steps) | refine its | PSNR live | PSNR converged | "
-      "deficit (dB) |\n|---:|---:|---:|:---:|---:|---:|---:|---:|---:|\n");
+      "| frame | frame ms | prepare ms | warp ms | sets dropped meanwhile | "
+      "converging | whole-image its (rejected steps) | refine its | PSNR live "
+      "| PSNR converged | deficit (dB) |\n"
+      "|---:|---:|---:|---:|---:|:---:|---:|---:|---:|---:|---:|\n");
   int dropped = 0, over_budget = 0, converged_at = -1;
   double sum_deficit = 0.0, worst_deficit = -1e9, first_ms = 0.0;
   for (int k = 0; k < o.frames; ++k) {
@@ -149,10 +150,13 @@ int main(int argc, char** argv) {
       sum_deficit += deficit;
       worst_deficit = std::max(worst_deficit, deficit);
     }
-    std::printf("| %d | %.1f | %d | %s | %d (%d) | %d | %.2f | %.2f | %.3f |\n",
-                k, ms, missed, r.still_converging ? "yes" : "no",
-                r.inner_iterations, r.rejected_outer_steps, r.refine_iterations,
-                psnr_live, psnr_best, deficit);
+    std::printf(
+        "| %d | %.1f | %.1f | %.1f | %d | %s | %d (%d) | %d | %.2f | %.2f | "
+        "%.3f |\n",
+        k, ms, 1e3 * r.prepare_seconds, 1e3 * result.warp_seconds, missed,
+        r.still_converging ? "yes" : "no", r.inner_iterations,
+        r.rejected_outer_steps, r.refine_iterations, psnr_live, psnr_best,
+        deficit);
     std::fflush(stdout);
   }
   std::printf(
