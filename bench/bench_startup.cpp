@@ -3,7 +3,8 @@
 // under cold_start_budget_ms) from its very first set, on a synthetic
 // sequence (640x480, scene 0 panning 0.3 degrees per frame, two inputs: the
 // paper's noise at sigma 0.4 and normals of noisy depth, rotation warm
-// start). Per frame: the frame's time, the sets a 30 Hz camera delivers
+// start). Per frame: the frame's time (and of it the input preparation
+// and the warp of the state), the sets a 30 Hz camera delivers
 // meanwhile that a busy node drops, whether the state is still converging
 // (SolverState::converging), the iterations, and the PSNR against a
 // converged cold solve of the same frame. Prints a table; not a test.
