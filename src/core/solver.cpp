@@ -101,7 +101,15 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     } else if (!state_.tgv.empty()) {
       state_.tgv.release();
     }
-    if (!cancelled() && levelRuns(warm_finest, report)) {
+    // A stream's cold start whose budget ran out before this finer level
+    // began: the upsampled coarser result is the frame's answer, since the
+    // level's first chunk and closing energy would only overrun the frame
+    // (its energies are then not measured).
+    const bool out_of_budget = report.cold_start_budget_used &&
+                               deadline_.active() && li + 1 < num_levels &&
+                               deadline_.secondsLeft() <= 0.0;
+    if (out_of_budget) report.budget_exhausted = true;
+    if (!cancelled() && !out_of_budget && levelRuns(warm_finest, report)) {
       runLevel(level, li == 0, report);
     }
     if (li > 0) {

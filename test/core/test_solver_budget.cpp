@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 
+#include "normal_fusion/metrics.h"
 #include "normal_fusion/solver.h"
 #include "solver_test_util.h"
 
@@ -140,6 +142,38 @@ TEST(Solver, ABudgetCutColdStartGoesOnConvergingInTheWarmFrames) {
   spendTheFrameBudget(solver);
   solver.solve(problem, stream, true, report);
   EXPECT_EQ(report.inner_iterations, 0);
+}
+
+/// A stream's cold start whose budget runs out before its finer levels
+/// begin hands on the upsampled coarsest result (no finest iterations, no
+/// energies), still converging, rather than overrunning the frame with the
+/// finest level's first chunk; a one-shot cold solve keeps its finest level.
+TEST(Solver, AStreamColdStartOutOfBudgetSkipsItsFinerLevels) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings = twoHundredIterationsUnderABudget();
+  settings.cold_start_budget_ms = 2000.0;
+  Solver solver(settings);
+  SolveReport report;
+  SolverState stream;
+  spendTheFrameBudget(solver);
+  solver.solve(problem, stream, true, report);
+  EXPECT_TRUE(report.cold_start_budget_used);
+  EXPECT_TRUE(report.budget_exhausted);
+  ASSERT_GE(report.pyramid_levels, 2);
+  EXPECT_GT(report.coarse_inner_iterations, 0);
+  EXPECT_EQ(report.inner_iterations, 0);
+  EXPECT_TRUE(std::isnan(report.final_energy));
+  EXPECT_TRUE(stream.converging);
+  expectUnit(stream.normals);
+  // The coarsest level's smoothing, upsampled: closer to the truth than the
+  // noisy input.
+  EXPECT_GT(psnr(stream.normals, gt), psnr(problem.inputs[0].normals, gt));
+  SolverState one_shot;
+  spendTheFrameBudget(solver);
+  solver.solve(problem, one_shot, false, report);
+  EXPECT_GT(report.inner_iterations, 0);
+  EXPECT_FALSE(std::isnan(report.final_energy));
 }
 
 }  // namespace
