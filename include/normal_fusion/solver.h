@@ -69,7 +69,8 @@ struct SolveReport {
   /// (and initial_energy, final_energy NaN) when the whole-image step was
   /// left out after a warm start's local refinement: always under a time
   /// budget (live), otherwise when the refinement used up the iterations'
-  /// time.
+  /// time; and when a stream's cold start ran out of cold_start_budget_ms
+  /// before its finest level began.
   std::vector<double> energies;
   std::vector<double> energy_seconds;  ///< when each of `energies` was reached,
                                        ///< since the solve began
@@ -198,9 +199,9 @@ void validateProblem(const FusionProblem& problem);
 PlanarImage computeEdgeWeights(const ColorImage& image,
                                const EdgeWeightSettings& settings);
 
-/// The energy E(n) of docs/algorithm.md for the given normals (need not be unit),
-/// with the problem's inputs prepared as the solver prepares them (orientation,
-/// validity, confidence, hard visibility).
+/// The energy E(n) of docs/algorithm.md for the given normals (need not be
+/// unit), with the problem's inputs prepared as the solver prepares them
+/// (orientation, validity, confidence, hard visibility).
 double computeEnergy(const FusionProblem& problem,
                      const SolverSettings& settings, const NormalMap& normals);
 
