@@ -65,8 +65,7 @@ inline Vec3 multiplyTransposed(const Mat3& M, const Vec3& v) {
 /// The pose applied to a point: R X + t.
 inline Vec3 transformPoint(const Pose& T, const Vec3& X) {
   const Vec3 RX = multiply(T.R, X);
-  return {{RX[0] + T.t[0], RX[1] + T.t[1],
-           RX[2] + T.t[2]}};
+  return {{RX[0] + T.t[0], RX[1] + T.t[1], RX[2] + T.t[2]}};
 }
 
 /// The inverse pose: R^T and -R^T t.

@@ -1,8 +1,9 @@
 // A stream of frames fused one after the other: when the previous result
 // warm-starts the next frame (moved by the camera's rotation, or by its full
 // motion through the previous frame's depth), when the stream restarts, the
-// inputs' averages over time and the frame budget's reserves. The policy the node runs, without ROS: the ROS pipeline, the
-// benchmarks and the tools all fuse their streams through it.
+// inputs' averages over time and the frame budget's reserves. The policy the
+// node runs, without ROS: the ROS pipeline, the benchmarks and the tools all
+// fuse their streams through it.
 #pragma once
 
 #include <array>

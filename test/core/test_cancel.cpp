@@ -392,8 +392,7 @@ TEST(Cancel, CancelledSolveLeavesNoTraceInTheNext) {
   // the preparation can outlast the first delay, so it doubles until then.
   for (double delay = 0.3; delay < 5.0; delay *= 2.0) {
     cancelled_state.clear();
-    solveCancelledAfter(solver, problem, cancelled_state, false, delay,
-                        report);
+    solveCancelledAfter(solver, problem, cancelled_state, false, delay, report);
     ASSERT_TRUE(report.cancelled);
     if (std::string(stage(report)) != "before the iterations") break;
   }
