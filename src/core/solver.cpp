@@ -90,10 +90,11 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     const PreparedLevel& level = levels_[li];
     state_.resize(level.width, level.height, level.num_inputs);
     const bool warm_finest = li == 0 && use_warm;
+    const bool from_coarser = li + 1 < num_levels;
     if (warm_finest) {
       startWarm(level, out, report);
     } else {
-      startCold(level, li + 1 < num_levels);
+      startCold(level, from_coarser);
     }
     // v and r start from 0 at every level (E(n0, 0) is the first-order E).
     if (settings_.tgv_alpha0 > 0.0) {
@@ -101,15 +102,7 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     } else if (!state_.tgv.empty()) {
       state_.tgv.release();
     }
-    // A stream's cold start whose budget ran out before this finer level
-    // began: the upsampled coarser result is the frame's answer, since the
-    // level's first chunk and closing energy would only overrun the frame
-    // (its energies are then not measured).
-    const bool out_of_budget = report.cold_start_budget_used &&
-                               deadline_.active() && li + 1 < num_levels &&
-                               deadline_.secondsLeft() <= 0.0;
-    if (out_of_budget) report.budget_exhausted = true;
-    if (!cancelled() && !out_of_budget && levelRuns(warm_finest, report)) {
+    if (!cancelled() && levelRuns(warm_finest, from_coarser, report)) {
       runLevel(level, li == 0, report);
     }
     if (li > 0) {
@@ -206,8 +199,20 @@ void SolverImpl::startCold(const PreparedLevel& level, bool from_coarser) {
   for (PlanarImage& q : state_.q) q.fill(0.0f);
 }
 
-bool SolverImpl::levelRuns(bool warm_finest, SolveReport& report) {
-  if (!warm_finest) return true;
+bool SolverImpl::levelRuns(bool warm_finest, bool from_coarser,
+                           SolveReport& report) {
+  if (!warm_finest) {
+    // A stream's cold start whose budget ran out before this finer level
+    // began: the upsampled coarser result is the frame's answer, since the
+    // level's first chunk and closing energy would only overrun the frame
+    // (its energies are then not measured).
+    if (from_coarser && report.cold_start_budget_used && deadline_.active() &&
+        deadline_.secondsLeft() <= 0.0) {
+      report.budget_exhausted = true;
+      return false;
+    }
+    return true;
+  }
   if (settings_.warm_refine_iterations > 0 && deadline_.active() &&
       !warm_converging_) {
     // Live (a time budget and the local refinement): the frame's time goes

@@ -92,8 +92,9 @@ class SolverImpl {
   /// the cold start, duals 0.
   void startCold(const internal::PreparedLevel& level, bool from_coarser);
   /// Whether the whole-image steps of a level run (a warm start's finest
-  /// level under a time budget may leave them out).
-  bool levelRuns(bool warm_finest, SolveReport& report);
+  /// level under a time budget may leave them out, and a stream's cold start
+  /// out of its budget those of the levels `from_coarser`).
+  bool levelRuns(bool warm_finest, bool from_coarser, SolveReport& report);
   /// The accepted normals and the duals handed to `out`.
   void writeOutput(SolverState& out, int width, int height, int num_inputs);
   /// Step sizes for L data terms; throws ParameterError when explicit steps
