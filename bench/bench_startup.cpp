@@ -7,11 +7,13 @@
 // and the warp of the state), the sets a 30 Hz camera delivers
 // meanwhile that a busy node drops, whether the state is still converging
 // (SolverState::converging), the iterations, and the PSNR against a
-// converged cold solve of the same frame. Prints a table; not a test.
+// converged cold solve of the same frame. The stream's buffers are reserved
+// before the first set (StreamFuser::reserve(), as the node does on its first
+// camera_info; --reserve 0: not). Prints a table; not a test.
 //
 //   bench_startup [--frames 30] [--threads 2] [--budget-ms 33]
 //                 [--cold-start-budget-ms 33] [--cold-filter-radius 0]
-//                 [--width 640 --height 480]
+//                 [--reserve 1] [--width 640 --height 480]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -34,6 +36,7 @@ struct Options {
   int frames = 30, threads = 2, width = 640, height = 480;
   double budget_ms = 33.0, cold_start_budget_ms = 33.0;
   int cold_filter_radius = 0;
+  bool reserve = true;
 };
 
 bool parseOptions(int argc, char** argv, Options& o) {
@@ -50,6 +53,8 @@ bool parseOptions(int argc, char** argv, Options& o) {
       o.cold_start_budget_ms = value;
     } else if (key == "--cold-filter-radius") {
       o.cold_filter_radius = static_cast<int>(value);
+    } else if (key == "--reserve") {
+      o.reserve = value != 0.0;
     } else if (key == "--width") {
       o.width = static_cast<int>(value);
     } else if (key == "--height") {
@@ -109,13 +114,22 @@ int main(int argc, char** argv) {
   nf::StreamFuser fuser(stream, "bench_startup");
   nf::Solver reference(convergedSettings(o.threads));
   const double period_ms = 1000.0 / 30.0;
+  // As the node does on its first camera_info, before the first set.
+  std::string reserved = "no";
+  if (o.reserve) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f ms",
+                  1e3 * fuser.reserve(o.width, o.height, 2));
+    reserved = text;
+  }
   std::printf("%s\n", nf::bench::machineLine().c_str());
   std::printf(
       "start-up of a live stream: %dx%d, scene 0 panning 0.3 deg/frame, two "
       "inputs, %d threads, budget %.1f ms, cold start budget %.1f ms, cold "
-      "filter radius %d, sets every %.1f ms\n\n",
+      "filter radius %d, sets every %.1f ms; buffers reserved before the "
+      "first set: %s\n\n",
       o.width, o.height, o.threads, o.budget_ms, o.cold_start_budget_ms,
-      o.cold_filter_radius, period_ms);
+      o.cold_filter_radius, period_ms, reserved.c_str());
   std::printf(
       "| frame | frame ms | prepare ms | warp ms | sets dropped meanwhile | "
       "converging | whole-image its (rejected steps) | refine its | PSNR live "

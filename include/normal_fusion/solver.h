@@ -46,6 +46,10 @@ struct SolverState {
   /// the first warm frame does not pay for it.
   void resize(int width, int height, int num_inputs);
   void clear();
+  /// Empty, as after clear(), but the buffers keep their memory: sized
+  /// again for the same problem (the next solve's output), they allocate
+  /// nothing.
+  void clearKeepingCapacity();
   /// Bytes of memory its buffers hold (their capacity).
   std::size_t bytesHeld() const;
 };
@@ -183,6 +187,13 @@ class Solver {
   void clearCancel() noexcept;
   /// True while a request is pending (requestCancel() without clearCancel()).
   bool cancelRequested() const noexcept;
+
+  /// Sizes the local refinement's buffers (warm_refine_iterations) for up
+  /// to `active_pixels` refined pixels of a `width` x `height` problem with
+  /// `num_inputs` inputs. A cold start sizes them for 1/16 of the pixels;
+  /// they grow on their own when a frame refines more.
+  void reserveRefinement(int width, int height, int num_inputs,
+                         int active_pixels);
 
   /// Bytes of memory the solver's own buffers hold (prepared levels,
   /// iteration state, scratch; not the caller's SolverState).

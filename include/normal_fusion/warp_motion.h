@@ -50,6 +50,16 @@ struct MotionWarpScratch {
     row_v_min.resize(static_cast<std::size_t>(height));
     row_v_max.resize(static_cast<std::size_t>(height));
   }
+
+  /// Bytes of memory its buffers hold (their capacity).
+  std::size_t bytesHeld() const {
+    return state.bytesHeld() +
+           nearest_depth_bits.capacity() * sizeof(std::uint32_t) +
+           winner.capacity() * sizeof(std::uint64_t) +
+           (splat_u.capacity() + splat_v.capacity() + splat_z.capacity() +
+            row_v_min.capacity() + row_v_max.capacity()) *
+               sizeof(float);
+  }
 };
 
 /// Warps a state solved on the previous frame into the current one, for a

@@ -63,7 +63,8 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     report.cold_start_budget_used = true;
   }
   if (!use_warm && settings_.warm_refine_iterations > 0) {
-    preallocateRefinement(W, H, L);
+    // For 1/16 of the pixels; they grow if a frame needs more.
+    preallocateRefinement(W, H, L, W * H / 16);
   }
   report.warm_started = use_warm;
   warm_converging_ = use_warm && out.converging;
@@ -340,6 +341,12 @@ bool Solver::cancelRequested() const noexcept {
 }
 
 std::size_t Solver::bytesHeld() const { return impl_->bytesHeld(); }
+
+void Solver::reserveRefinement(int width, int height, int num_inputs,
+                               int active_pixels) {
+  impl_->preallocateRefinement(width, height, num_inputs,
+                               std::min(active_pixels, width * height));
+}
 
 void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {
   impl_->budget_start_ = frame_start;

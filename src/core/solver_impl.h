@@ -64,6 +64,11 @@ class SolverImpl {
   /// Solver::bytesHeld().
   std::size_t bytesHeld() const;
 
+  /// Sizes the local refinement's buffers for `active_pixels` refined
+  /// pixels: on a cold start for the warm starts to come, and from
+  /// Solver::reserveRefinement().
+  void preallocateRefinement(int W, int H, int num_inputs, int active_pixels);
+
   /// Solver::requestCancel(): set by the caller (any thread), read by the
   /// solve, never cleared by it.
   std::atomic<bool> cancel_request_{false};
@@ -160,9 +165,6 @@ class SolverImpl {
   /// more than 4 times the pixels this image's level of that depth has. (A
   /// stream of one size keeps its cold start's levels for the next one.)
   void releaseUnusedLevels(int used);
-  /// Sizes the local refinement's buffers on a cold start, for the warm
-  /// starts to come.
-  void preallocateRefinement(int W, int H, int num_inputs);
 
   const internal::KernelBackend* backend_ = &internal::fastBackend();
   internal::Deadline deadline_;

@@ -105,6 +105,14 @@ void SolverState::clear() {
   converging = false;
 }
 
+void SolverState::clearKeepingCapacity() {
+  normals.resizeKeepingCapacity(0, 0, 3);
+  dual_h.resizeKeepingCapacity(0, 0, 3);
+  dual_v.resizeKeepingCapacity(0, 0, 3);
+  for (PlanarImage& q : dual_data) q.resizeKeepingCapacity(0, 0, 3);
+  converging = false;
+}
+
 std::size_t SolverState::bytesHeld() const {
   std::size_t bytes =
       normals.bytesHeld() + dual_h.bytesHeld() + dual_v.bytesHeld();

@@ -113,10 +113,10 @@ void SolverImpl::releaseUnusedLevels(int used) {
   }
 }
 
-void SolverImpl::preallocateRefinement(int W, int H, int num_inputs) {
-  // Sized for 1/16 of the pixels; they grow if a frame needs more.
+void SolverImpl::preallocateRefinement(int W, int H, int num_inputs,
+                                       int active_pixels) {
   refine_.active.preallocate(W, H);
-  refine_.gathered.preallocate(W, H, num_inputs, W * H / 16);
+  refine_.gathered.preallocate(W, H, num_inputs, active_pixels);
   unknown_.resize(static_cast<std::size_t>(W) * H);
   edge_scratch_map_.resize(static_cast<std::size_t>(W) * H);
   fill_pending_.reserve(static_cast<std::size_t>(W) * H);

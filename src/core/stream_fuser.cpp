@@ -32,6 +32,10 @@ FrameRotation FrameRotation::unknown(const std::string& reason) {
 
 namespace {
 
+/// reserve() sizes the local refinement for 1 / kReservedRefinedShare of the
+/// pixels.
+constexpr int kReservedRefinedShare = 4;
+
 /// later - earlier in seconds (integer nanoseconds, no overflow for stamps
 /// of this era).
 double secondsBetween(std::int64_t later_ns, std::int64_t earlier_ns) {
@@ -243,7 +247,8 @@ void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
         static_cast<int>(frame.inputs.size()), &result->restart_reason);
     if (!continuous && settings_.warm_start) {
       result->stream_started = true;
-      state_.clear();
+      // Its buffers kept: a restart of the same size allocates nothing.
+      state_.clearKeepingCapacity();
     }
   }
   if (continuous && rotation.kind != FrameRotation::Kind::kStill) {
@@ -312,6 +317,72 @@ void StreamFuser::keepDepth(const ScalarMap* depth_m,
             previous_depth_m_.data());
   motion_scratch_.resize(state_.normals.width(), state_.normals.height(),
                          static_cast<int>(state_.dual_data.size()));
+}
+
+double StreamFuser::reserve(int width, int height, int num_inputs,
+                            bool with_depth) {
+  if (width < 2 || height < 2 || num_inputs < 1) {
+    std::ostringstream text;
+    text << name_ << ": reserve: a " << width << "x" << height << " frame with "
+         << num_inputs << " inputs (at least 2x2 and one input)";
+    throw InputError(text.str());
+  }
+  const auto start = std::chrono::steady_clock::now();
+  reset();
+  // A flat wall facing the camera, grey, seen by every input but for every
+  // 8th pixel (holes put a cold start on the pyramid, as a stream's is):
+  // the solves take the stream's own paths and end fast.
+  FusionProblem frame;
+  frame.image.resize(width, height, 3);
+  frame.image.fill(0.5f);
+  const double f = std::max(width, height);
+  frame.K = CameraIntrinsics(f, f, 0.5 * (width - 1), 0.5 * (height - 1));
+  NormalInput flat;
+  flat.normals.resize(width, height, 3);
+  float* z = flat.normals.plane(2);
+  for (long i = 0; i < static_cast<long>(width) * height; ++i) {
+    z[i] = i % 8 == 0 ? 0.0f : -1.0f;
+  }
+  frame.inputs.assign(static_cast<std::size_t>(num_inputs), flat);
+  const int threads = resolveThreadCount(solver_.settings().num_threads);
+  if (settings_.temporal.enabled()) {
+    // Started, then carried by a rotation (its scratch).
+    std::vector<NormalInput> inputs = frame.inputs;
+    for (const Mat3* R : {static_cast<const Mat3*>(nullptr), &kIdentity3}) {
+      temporal_.apply(inputs, frame.K, R, settings_.temporal, threads);
+    }
+  }
+  solve(frame, settings_.warm_start, std::chrono::steady_clock::now());
+  if (settings_.warm_start) {
+    // The flat frame refines nothing: room for a quarter of the pixels (a
+    // live frame refines its map's edges and changes, mostly far fewer).
+    solver_.reserveRefinement(width, height, num_inputs,
+                              width * height / kReservedRefinedShare);
+    const DualWarp dual_warp = settings_.dual_warp.value_or(DualWarp::kRotate);
+    if (with_depth) {
+      const ScalarMap depth_m(width, height, 1, 1.0f);
+      keepDepth(&depth_m, frame);
+      warpStateByMotion(state_, previous_depth_m_, frame.K, Pose(),
+                        motion_scratch_, threads, dual_warp);
+    }
+    warpStateByRotation(state_, frame.K, kIdentity3, warp_scratch_, threads,
+                        dual_warp);
+    solve(frame, true, std::chrono::steady_clock::now());
+  }
+  // Forgotten, the memory kept: the next frame starts the stream.
+  temporal_.reset();
+  state_.clearKeepingCapacity();
+  has_previous_ = false;
+  has_previous_depth_ = false;
+  averages_current_ = false;
+  report_ = SolveReport();
+  return secondsSince(start);
+}
+
+std::size_t StreamFuser::bytesHeld() const {
+  return solver_.bytesHeld() + state_.bytesHeld() + warp_scratch_.bytesHeld() +
+         motion_scratch_.bytesHeld() + previous_depth_m_.bytesHeld() +
+         temporal_.bytesHeld();
 }
 
 double StreamFuser::endFrame(double encode_seconds) {

@@ -96,6 +96,28 @@ Held held(const Solver& solver, const SolverState& state,
   return {solver.bytesHeld(), state.bytesHeld(), scratch.bytesHeld()};
 }
 
+/// clear() gives a state's memory back; clearKeepingCapacity() keeps it
+/// (a stream's restart then allocates nothing), and either leaves a state
+/// that warm-starts nothing; sized again, the kept buffers are reused.
+TEST(Memory, AStateClearedKeepingCapacityHoldsItsBuffers) {
+  SolverState state;
+  state.resize(40, 30, 2);
+  state.converging = true;
+  const std::size_t bytes = state.bytesHeld();
+  EXPECT_EQ(bytes, 5 * 40 * 30 * 3 * kFloat);  // n, p_h, p_v, q_0, q_1
+  state.clearKeepingCapacity();
+  EXPECT_EQ(state.bytesHeld(), bytes);
+  EXPECT_FALSE(state.compatible(40, 30, 2));
+  EXPECT_FALSE(state.converging);
+  const float* normals = state.normals.data();
+  state.resize(40, 30, 2);
+  EXPECT_EQ(state.normals.data(), normals);
+  EXPECT_TRUE(state.compatible(40, 30, 2));
+  state.clear();
+  EXPECT_EQ(state.bytesHeld(), 0u);
+  EXPECT_FALSE(state.compatible(40, 30, 2));
+}
+
 /// A stream at 1600x1200, then one at 64x48 with the same solver, state and
 /// scratch: they then hold about what a fresh solver, state and scratch
 /// hold after the small stream alone (here at most twice), not the large

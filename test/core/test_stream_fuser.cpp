@@ -252,6 +252,47 @@ TEST(StreamFuser, TheDualsAreResetWithTheLocalRefinement) {
   EXPECT_FALSE(sameBits(unrefined, fused(0, DualWarp::kReset)));
 }
 
+/// reserve() sizes the buffers of the stream's first frames: they then
+/// allocate nothing, and fuse bit for bit what an unreserved stream fuses.
+TEST(StreamFuser, AReservedStreamAllocatesNothingAndFusesTheSame) {
+  const int W = 160, H = 120;
+  const auto frames = synthetic::renderSequence(0, W, H, 4, 1.0);
+  StreamSettings settings = streamSettings();
+  settings.solver.time_budget_ms = 0.0;  // by the iterations: bits repeat
+  settings.temporal.frames = 4;          // the averages' buffers too
+  StreamFuser reserved(settings), plain(settings);
+  EXPECT_GT(reserved.reserve(W, H, 2, true), 0.0);
+  const std::size_t bytes_reserved = reserved.bytesHeld();
+  EXPECT_GT(bytes_reserved, 0u);
+  EXPECT_EQ(plain.bytesHeld(), 0u);
+  for (int k = 0; k < 4; ++k) {
+    const FrameRotation rotation =
+        k == 0 ? FrameRotation::still()
+               : FrameRotation::knownMotion(synthetic::relativePose(
+                     frames[k].pose, frames[k - 1].pose));
+    StreamResult result_reserved, result_plain;
+    for (auto* run : {&reserved, &plain}) {
+      FusionProblem problem = problemFor(frames[k], k);
+      run->fuse(nanoseconds(frames[k].stamp), problem, rotation,
+                std::chrono::steady_clock::now(),
+                run == &reserved ? &result_reserved : &result_plain,
+                &frames[k].depth);
+      run->endFrame(0.0);
+    }
+    // The reserved stream starts with its first real frame, as the other.
+    EXPECT_EQ(result_reserved.stream_started, k == 0);
+    EXPECT_EQ(result_reserved.motion_warped, k > 0);
+    EXPECT_EQ(result_reserved.inputs_averaged, k > 0);
+    EXPECT_EQ(reserved.lastReport().warm_started, k > 0);
+    EXPECT_TRUE(sameBits(reserved.fusedNormals(), plain.fusedNormals()))
+        << "frame " << k;
+    EXPECT_EQ(reserved.bytesHeld(), bytes_reserved) << "frame " << k;
+  }
+  EXPECT_LE(plain.bytesHeld(), bytes_reserved);
+  EXPECT_THROW(reserved.reserve(1, H, 2), InputError);
+  EXPECT_THROW(reserved.reserve(W, H, 0), InputError);
+}
+
 TEST(StreamFuser, AFailedSolveResetsTheStream) {
   const synthetic::Frame frame = synthetic::renderScene(0, 64, 48);
   StreamFuser fuser(streamSettings());
