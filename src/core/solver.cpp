@@ -58,8 +58,15 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   if (warm && !use_warm && deadline_.active()) {
     // A stream's cold start (a warm start asked for, nothing usable to start
     // from) under a frame budget: its own budget (none by default), since
-    // the warm frames after it carry its map on.
-    deadline_.start(budget_start, settings_.cold_start_budget_ms);
+    // the warm frames after it carry its map on. Its levels end early by
+    // what the last one's tail took (the finest level's start and the
+    // output), so that the frame ends within it (at most half of it).
+    const double budget_ms = settings_.cold_start_budget_ms;
+    report.cold_start_tail_reserved_seconds =
+        budget_ms > 0.0 ? std::min(cold_start_tail_seconds_, 0.5e-3 * budget_ms)
+                        : 0.0;
+    deadline_.start(budget_start,
+                    budget_ms - 1e3 * report.cold_start_tail_reserved_seconds);
     report.cold_start_budget_used = true;
   }
   if (!use_warm && settings_.warm_refine_iterations > 0) {
@@ -85,9 +92,11 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   // Cancelled from here on, the finest level still sets up its start (cheap:
   // a pass or two, no iterations), so that `out` receives unit normals of the
   // problem's size.
+  double tail_seconds = 0.0;  // the finest level's start and the output
   for (int li = num_levels - 1; li >= 0; --li) {
     // Cancelled: the finest level starts from the last level that ran.
     if (li > 0 && li + 1 < num_levels && cancelled()) continue;
+    const Clock::time_point level_start = Clock::now();
     const PreparedLevel& level = levels_[li];
     state_.resize(level.width, level.height, level.num_inputs);
     const bool warm_finest = li == 0 && use_warm;
@@ -103,6 +112,7 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     } else if (!state_.tgv.empty()) {
       state_.tgv.release();
     }
+    if (li == 0) tail_seconds += secondsSince(level_start);
     if (!cancelled() && levelRuns(warm_finest, from_coarser, report)) {
       runLevel(level, li == 0, report);
     }
@@ -115,7 +125,12 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
       }
     }
   }
+  const Clock::time_point output_start = Clock::now();
   writeOutput(out, W, H, L);
+  if (!cancelled_ && report.cold_start_budget_used) {
+    report.cold_start_tail_seconds = tail_seconds + secondsSince(output_start);
+    cold_start_tail_seconds_ = report.cold_start_tail_seconds;
+  }
   if (!cancelled_) {
     // A warm state converges when an outer step meets the tolerance or a
     // whole one is rejected (a step the budget cut to a few iterations

@@ -354,6 +354,11 @@ double StreamFuser::reserve(int width, int height, int num_inputs,
   }
   solve(frame, settings_.warm_start, std::chrono::steady_clock::now());
   if (settings_.warm_start) {
+    // The cold start once more, its memory now in place: what its end takes
+    // (the solver sets that aside in the next cold start's budget) is then
+    // what the stream's own will take.
+    state_.clearKeepingCapacity();
+    solve(frame, true, std::chrono::steady_clock::now());
     // The flat frame refines nothing: room for a quarter of the pixels (a
     // live frame refines its map's edges and changes, mostly far fewer).
     solver_.reserveRefinement(width, height, num_inputs,

@@ -116,6 +116,49 @@ TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
   expectUnit(restart.normals);
 }
 
+/// A stream's cold start under cold_start_budget_ms sets aside what the last
+/// one's tail took (the finest level's start and the output), at most half
+/// of the budget; one-shot solves and warm frames neither use nor change
+/// that figure.
+TEST(Solver, AStreamColdStartSetsAsideTheLastOnesTail) {
+  NormalMap gt;
+  FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
+  SolverSettings settings = twoHundredIterationsUnderABudget();
+  settings.cold_start_budget_ms = 2000.0;
+  Solver solver(settings);
+  SolveReport report;
+  SolverState first;
+  solver.solve(problem, first, true, report);
+  ASSERT_TRUE(report.cold_start_budget_used);
+  EXPECT_EQ(report.cold_start_tail_reserved_seconds, 0.0);  // none yet
+  EXPECT_GT(report.cold_start_tail_seconds, 0.0);
+  const double first_tail = report.cold_start_tail_seconds;
+  SolverState second;
+  solver.solve(problem, second, true, report);
+  EXPECT_EQ(report.cold_start_tail_reserved_seconds, first_tail);
+  const double second_tail = report.cold_start_tail_seconds;
+  EXPECT_GT(second_tail, 0.0);
+  // A warm frame and a one-shot solve: no cold-start budget, no tail.
+  solver.solve(problem, second, true, report);
+  EXPECT_TRUE(report.warm_started);
+  EXPECT_EQ(report.cold_start_tail_reserved_seconds, 0.0);
+  EXPECT_EQ(report.cold_start_tail_seconds, 0.0);
+  SolverState one_shot;
+  solver.solve(problem, one_shot, false, report);
+  EXPECT_FALSE(report.cold_start_budget_used);
+  EXPECT_EQ(report.cold_start_tail_seconds, 0.0);
+  SolverState third;
+  solver.solve(problem, third, true, report);
+  EXPECT_EQ(report.cold_start_tail_reserved_seconds, second_tail);
+  // At most half of the budget.
+  settings.cold_start_budget_ms = 1e-9;
+  solver.setSettings(settings);
+  SolverState fourth;
+  solver.solve(problem, fourth, true, report);
+  EXPECT_DOUBLE_EQ(report.cold_start_tail_reserved_seconds, 0.5e-12);
+  expectUnit(fourth.normals);
+}
+
 /// A stream's cold start that its budget cuts short hands on a converging
 /// state; one whose budget ran out before its finer levels began hands on
 /// the upsampled coarsest result (no finest iterations, no energies) rather
