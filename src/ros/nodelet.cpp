@@ -361,6 +361,17 @@ void NormalFusionNodelet::handleMessage(int topic,
     logThrottled(true, std::string(e.what()) + "; message skipped");
     return;
   }
+  if (role.kind == TopicRole::kCameraInfo && message.info) {
+    // The first camera_info gives the size before the first set: the worker
+    // reserves the stream's buffers meanwhile.
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    if (!reserve_asked_) {
+      reserve_asked_ = true;
+      reserve_size_.emplace(static_cast<int>(message.info->width),
+                            static_cast<int>(message.info->height));
+      work_cv_.notify_one();
+    }
+  }
   std::vector<Synchronizer::Set> sets;
   std::vector<Synchronizer::Discard> discards;
   {
@@ -530,8 +541,18 @@ void NormalFusionNodelet::workerLoop() {
     bool reset = false;
     {
       std::unique_lock<std::mutex> lock(work_mutex_);
-      work_cv_.wait(lock, [this] { return stop_ || pending_.has_value(); });
+      work_cv_.wait(lock, [this] {
+        return stop_ || pending_.has_value() || reserve_size_.has_value();
+      });
       if (stop_) return;
+      // Before the first set only: a set already waiting is the first frame.
+      std::optional<std::pair<int, int>> reserve;
+      reserve.swap(reserve_size_);
+      if (!pending_) {
+        lock.unlock();
+        if (reserve && frames_processed_ == 0) reserveBuffers(*reserve);
+        continue;
+      }
       set = std::move(*pending_);
       pending_.reset();
       formed = pending_formed_;
@@ -588,6 +609,28 @@ void NormalFusionNodelet::workerLoop() {
       last_output_time_ = done;
     }
     publishOutputs(output);
+  }
+}
+
+void NormalFusionNodelet::reserveBuffers(const std::pair<int, int>& size) {
+  applyNewSettings();
+  try {
+    double seconds = 0.0;
+    if (pipeline_->reserveFor(size.first, size.second, &seconds)) {
+      NODELET_INFO(
+          "buffers of the stream reserved for %dx%d sets (from the first "
+          "camera_info) in %.0f ms",
+          size.first, size.second, 1e3 * seconds);
+    }
+  } catch (const Cancelled&) {
+    // shutting down
+  } catch (const std::exception& e) {
+    // Not needed for the sets: they size what they use themselves.
+    pipeline_->resetWarmStart();
+    NODELET_WARN(
+        "reserving the stream's buffers for %dx%d sets failed (%s); "
+        "the first sets allocate them",
+        size.first, size.second, e.what());
   }
 }
 

@@ -234,6 +234,19 @@ void FusionPipeline::setSettings(const NodeSettings& settings) {
 
 void FusionPipeline::resetWarmStart() { fuser_.reset(); }
 
+bool FusionPipeline::reserveFor(int width, int height, double* seconds) {
+  const bool live =
+      settings_.warm_start && settings_.solver.time_budget_ms > 0.0;
+  if (!live || width < 2 || height < 2 ||
+      static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height) >
+          static_cast<std::uint64_t>(settings_.max_pixels)) {
+    return false;
+  }
+  *seconds =
+      fuser_.reserve(width, height, settings_.num_inputs, settings_.use_depth);
+  return true;
+}
+
 StreamSettings streamSettingsFrom(const NodeSettings& settings) {
   StreamSettings stream;
   stream.solver = settings.solver;

@@ -237,6 +237,47 @@ TEST(Pipeline, StreamStartIsSolvedUnderTheColdStartBudget) {
   }
 }
 
+/// reserveFor(): a live stream's buffers reserved from the first
+/// camera_info's size; the sets are then fused as without it. Refused
+/// (nothing done) when the stream is not live or for a size no set may have.
+TEST(Pipeline, ReservesALiveStreamsBuffersBeforeTheFirstSet) {
+  SceneFixture fixture;
+  // Live, with a budget that the iteration caps end first: the bits repeat.
+  fixture.settings.solver.time_budget_ms = 1e6;
+  fixture.settings.solver.max_total_inner_iterations = 60;
+  const test::NoisyFrame f =
+      test::noisyFrame(synthetic::renderScene(0, 64, 48), 5);
+  FusionPipeline reserved(fixture.settings, TopicNames::defaults(2));
+  FusionPipeline plain(fixture.settings, TopicNames::defaults(2));
+  double seconds = 0.0;
+  EXPECT_FALSE(reserved.reserveFor(1, 48, &seconds));
+  EXPECT_FALSE(
+      reserved.reserveFor(fixture.settings.max_pixels / 48 + 1, 48, &seconds));
+  EXPECT_EQ(seconds, 0.0);
+  ASSERT_TRUE(reserved.reserveFor(64, 48, &seconds));
+  EXPECT_GT(seconds, 0.0);
+  for (double stamp : {1.0, 1.033}) {
+    PipelineOutput a, b;
+    reserved.process(fixture.setFor(f, stamp), nullptr, false, &a);
+    plain.process(fixture.setFor(f, stamp), nullptr, false, &b);
+    EXPECT_EQ(a.stats->warm_started, stamp > 1.0);
+    EXPECT_EQ(a.stats->inner_iterations, b.stats->inner_iterations);
+    const NormalMap& x = reserved.fusedNormals();
+    const NormalMap& y = plain.fusedNormals();
+    ASSERT_TRUE(x.sameSize(y));
+    EXPECT_TRUE(std::equal(x.data(), x.data() + 3 * x.pixelCount(), y.data()))
+        << "set at " << stamp;
+  }
+  // Not live: warm starts off, or no time budget.
+  fixture.settings.warm_start = false;
+  FusionPipeline one_shot(fixture.settings, TopicNames::defaults(2));
+  EXPECT_FALSE(one_shot.reserveFor(64, 48, &seconds));
+  fixture.settings.warm_start = true;
+  fixture.settings.solver.time_budget_ms = 0.0;
+  FusionPipeline offline(fixture.settings, TopicNames::defaults(2));
+  EXPECT_FALSE(offline.reserveFor(64, 48, &seconds));
+}
+
 TEST(Pipeline, RotationCompensatedWarmStartUsesTheLookup) {
   SceneFixture fixture;
   fixture.settings.fixed_frame = "world";

@@ -25,6 +25,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "normal_fusion/ros/log_throttle.h"
@@ -63,6 +64,9 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   /// The worker's settings: dynamic_reconfigure's changes handed to the
   /// pipeline; returns the motion lookup they ask for (empty: none).
   CameraMotionLookup applyNewSettings();
+  /// On the worker, before the first set: the stream's buffers reserved
+  /// for sets of the first camera_info's size (a failure only logged).
+  void reserveBuffers(const std::pair<int, int>& size);
   void publishOutputs(const PipelineOutput& output);
   // Diagnostics (src/ros/diagnostics.cpp): the updater, its timer and the
   // warning when no set forms.
@@ -108,6 +112,10 @@ class NormalFusionNodelet : public nodelet::Nodelet {
   bool stop_ = false;
   /// Time went back: the worker drops the warm start before the next set.
   bool stream_reset_ = false;
+  /// The first camera_info's size, for the worker to reserve the stream's
+  /// buffers before the first set (FusionPipeline::reserveFor()); asked once.
+  std::optional<std::pair<int, int>> reserve_size_;
+  bool reserve_asked_ = false;
   std::thread worker_;
   std::unique_ptr<FusionPipeline> pipeline_;  ///< used by the worker only
 

@@ -177,6 +177,14 @@ class FusionPipeline {
   /// Forgets the previous frame: the next set cold-starts.
   void resetWarmStart();
 
+  /// Before the first set, from its camera_info: reserves the stream's
+  /// buffers for `width` x `height` sets (StreamFuser::reserve()) when the
+  /// stream is live (warm starts under a time budget), so that its first
+  /// frames keep the budget. Returns false, doing nothing, when it is not
+  /// live or the size is one no set may have (below 2x2, above max_pixels);
+  /// else the seconds it took in *seconds.
+  bool reserveFor(int width, int height, double* seconds);
+
   /// From any thread: the solve under way (and every later one) stops within
   /// an inner iteration block; process() then throws Cancelled. For shutdown.
   void requestCancel() noexcept { fuser_.requestCancel(); }
