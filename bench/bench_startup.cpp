@@ -117,9 +117,10 @@ int main(int argc, char** argv) {
   // As the node does on its first camera_info, before the first set.
   std::string reserved = "no";
   if (o.reserve) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%.1f ms",
-                  1e3 * fuser.reserve(o.width, o.height, 2));
+    char text[64];
+    const double seconds = fuser.reserve(o.width, o.height, 2);
+    std::snprintf(text, sizeof text, "%.1f ms, %.1f MB", 1e3 * seconds,
+                  1e-6 * static_cast<double>(fuser.bytesHeld()));
     reserved = text;
   }
   std::printf("%s\n", nf::bench::machineLine().c_str());
