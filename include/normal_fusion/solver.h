@@ -97,10 +97,11 @@ struct SolveReport {
   /// A stream's cold start under time_budget_ms: the solve ran under
   /// SolverSettings::cold_start_budget_ms instead.
   bool cold_start_budget_used = false;
-  /// Of that budget, the seconds set aside for the solve's tail (the finest
-  /// level's start and the output, as the last such cold start took them:
-  /// its levels end that much earlier; at most half of the budget), and
-  /// what this one's tail took (seconds; 0 when no budget was used).
+  /// Of that budget, the seconds set aside for the solve's tail (the levels
+  /// left out once the budget ran out, the finest level's start and the
+  /// output, as the last such cold start took them: its levels end that
+  /// much earlier; at most half of the budget), and what this one's tail
+  /// took (seconds; 0 when no budget was used).
   double cold_start_tail_reserved_seconds = 0.0;
   double cold_start_tail_seconds = 0.0;
   /// The state handed on is not yet converged (SolverState::converging).

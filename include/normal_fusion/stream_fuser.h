@@ -230,6 +230,9 @@ class StreamFuser {
   std::uint64_t frames_fused_ = 0;
   /// Seconds the caller's encoding takes, reserved inside the frame budget.
   double encode_estimate_s_ = 0.0;
+  /// Seconds the last frame's checks after its solve took (the output's
+  /// unit normals, the depth kept), reserved inside the next frame's budget.
+  double checks_s_ = 0.0;
   /// Seconds reserved for what the solve's own deadline cannot foresee (a
   /// loaded machine).
   double overrun_reserve_s_ = 0.0;

@@ -92,7 +92,7 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   // Cancelled from here on, the finest level still sets up its start (cheap:
   // a pass or two, no iterations), so that `out` receives unit normals of the
   // problem's size.
-  double tail_seconds = 0.0;  // the finest level's start and the output
+  double tail_seconds = 0.0;  // see cold_start_tail_seconds_
   for (int li = num_levels - 1; li >= 0; --li) {
     // Cancelled: the finest level starts from the last level that ran.
     if (li > 0 && li + 1 < num_levels && cancelled()) continue;
@@ -112,10 +112,10 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     } else if (!state_.tgv.empty()) {
       state_.tgv.release();
     }
-    if (li == 0) tail_seconds += secondsSince(level_start);
-    if (!cancelled() && levelRuns(warm_finest, from_coarser, report)) {
-      runLevel(level, li == 0, report);
-    }
+    const double start_seconds = secondsSince(level_start);
+    const bool runs =
+        !cancelled() && levelRuns(warm_finest, from_coarser, report);
+    if (runs) runLevel(level, li == 0, report);
     if (li > 0) {
       coarse_result_ = state_.n0;
       if (settings_.prolong_duals) {
@@ -123,6 +123,13 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
         coarse_p_v_ = state_.p_v;
         coarse_q_ = state_.q;
       }
+    }
+    // The tail that follows a cold start's last iterations: every level left
+    // out, and the finest level's start.
+    if (!runs) {
+      tail_seconds += secondsSince(level_start);
+    } else if (li == 0) {
+      tail_seconds += start_seconds;
     }
   }
   const Clock::time_point output_start = Clock::now();

@@ -174,9 +174,10 @@ class SolverImpl {
   std::vector<int> fill_pending_;                ///< fillUnknownPixels()
   std::vector<unsigned char> unknown_;  ///< pixels the warm start lacked
   internal::RefinementBuffers refine_;  ///< the local refinement's buffers
-  /// What the last stream's cold start under cold_start_budget_ms took from
-  /// the start of its finest level (less that level's iterations) to its
-  /// end: set aside in the next one's budget.
+  /// What the last stream's cold start under cold_start_budget_ms spent
+  /// outside its levels' iterations after them: the levels it left out, its
+  /// finest level's start and the output. Set aside in the next one's
+  /// budget.
   double cold_start_tail_seconds_ = 0.0;
   double level_seconds_ = 0.0;  ///< least cost of the finest level, measured
   /// Finest first; grown (releaseUnusedLevels() frees what a larger image

@@ -179,11 +179,12 @@ void StreamFuser::solve(FusionProblem& frame, bool warm,
                         std::chrono::steady_clock::time_point started) {
   try {
     // time_budget_ms covers the whole frame, the caller's encoding of the
-    // outputs included: its time (as the last frames took) and the overrun
-    // reserve are set aside by starting the budget that much earlier.
+    // outputs included: its time (as the last frames took), the checks
+    // after the solve (as the last frame's took) and the overrun reserve are
+    // set aside by starting the budget that much earlier.
     const auto reserve =
         std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-            std::chrono::duration<double>(encode_estimate_s_ +
+            std::chrono::duration<double>(encode_estimate_s_ + checks_s_ +
                                           overrun_reserve_s_));
     solver_.setBudgetStart(started - reserve);
     solver_.solve(frame, state_, warm, report_);
@@ -282,6 +283,7 @@ void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
   }
   result->budget_reserve_seconds = overrun_reserve_s_;
   solve(frame, warm || result->stream_started, started);
+  const auto checks_start = std::chrono::steady_clock::now();
   if (result->stream_started) {
     result->note = streamStartNote(result->restart_reason);
   }
@@ -301,6 +303,8 @@ void StreamFuser::fuse(std::int64_t stamp_ns, FusionProblem& frame,
   previous_stamp_ns_ = stamp_ns;
   previous_K_ = frame.K;
   ++frames_fused_;
+  // What the checks after the solve took: reserved in the next budget.
+  checks_s_ = secondsSince(checks_start);
   // Until endFrame() says more: the frame's time so far.
   previous_seconds_ = secondsSince(started);
 }
@@ -354,11 +358,13 @@ double StreamFuser::reserve(int width, int height, int num_inputs,
   }
   solve(frame, settings_.warm_start, std::chrono::steady_clock::now());
   if (settings_.warm_start) {
-    // The cold start once more, its memory now in place: what its end takes
-    // (the solver sets that aside in the next cold start's budget) is then
-    // what the stream's own will take.
+    // The cold start once more, its memory now in place and its budget
+    // spent at its first chunk: what its tail takes, every finer level left
+    // out (the solver sets that aside in the next cold start's budget), is
+    // then at least what the stream's own will take.
     state_.clearKeepingCapacity();
-    solve(frame, true, std::chrono::steady_clock::now());
+    solve(frame, true,
+          std::chrono::steady_clock::now() - std::chrono::hours(1));
     // The flat frame refines nothing: room for a quarter of the pixels (a
     // live frame refines its map's edges and changes, mostly far fewer).
     solver_.reserveRefinement(width, height, num_inputs,
@@ -373,6 +379,11 @@ double StreamFuser::reserve(int width, int height, int num_inputs,
     warpStateByRotation(state_, frame.K, kIdentity3, warp_scratch_, threads,
                         dual_warp);
     solve(frame, true, std::chrono::steady_clock::now());
+    // The checks after a solve, timed for the first frame's budget.
+    const auto checks_start = std::chrono::steady_clock::now();
+    if (nonUnitPixels(state_.normals) == 0) {
+      checks_s_ = secondsSince(checks_start);
+    }
   }
   // Forgotten, the memory kept: the next frame starts the stream.
   temporal_.reset();
