@@ -198,7 +198,8 @@ class Solver {
   /// Sizes the local refinement's buffers (warm_refine_iterations) for up
   /// to `active_pixels` refined pixels of a `width` x `height` problem with
   /// `num_inputs` inputs. A cold start sizes them for 1/16 of the pixels;
-  /// they grow on their own when a frame refines more.
+  /// they grow on their own when a frame refines more. Throws InputError
+  /// for an empty size or no input.
   void reserveRefinement(int width, int height, int num_inputs,
                          int active_pixels);
 

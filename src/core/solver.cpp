@@ -59,8 +59,9 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     // A stream's cold start (a warm start asked for, nothing usable to start
     // from) under a frame budget: its own budget (none by default), since
     // the warm frames after it carry its map on. Its levels end early by
-    // what the last one's tail took (the finest level's start and the
-    // output), so that the frame ends within it (at most half of it).
+    // what the last one's tail took (the levels left out, the finest level's
+    // start and the output), so that the frame ends within it (at most half
+    // of it).
     const double budget_ms = settings_.cold_start_budget_ms;
     report.cold_start_tail_reserved_seconds =
         budget_ms > 0.0 ? std::min(cold_start_tail_seconds_, 0.5e-3 * budget_ms)
@@ -366,8 +367,14 @@ std::size_t Solver::bytesHeld() const { return impl_->bytesHeld(); }
 
 void Solver::reserveRefinement(int width, int height, int num_inputs,
                                int active_pixels) {
+  if (width < 1 || height < 1 || num_inputs < 1) {
+    std::ostringstream text;
+    text << "reserveRefinement: a " << width << "x" << height
+         << " problem with " << num_inputs << " inputs";
+    throw InputError(text.str());
+  }
   impl_->preallocateRefinement(width, height, num_inputs,
-                               std::min(active_pixels, width * height));
+                               std::clamp(active_pixels, 0, width * height));
 }
 
 void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {

@@ -291,6 +291,11 @@ TEST(StreamFuser, AReservedStreamAllocatesNothingAndFusesTheSame) {
   EXPECT_LE(plain.bytesHeld(), bytes_reserved);
   EXPECT_THROW(reserved.reserve(1, H, 2), InputError);
   EXPECT_THROW(reserved.reserve(W, H, 0), InputError);
+  Solver solver;
+  EXPECT_THROW(solver.reserveRefinement(0, H, 2, 10), InputError);
+  EXPECT_THROW(solver.reserveRefinement(W, H, 0, 10), InputError);
+  solver.reserveRefinement(W, H, 2, -5);  // none: sizes for no pixel
+  EXPECT_GT(solver.bytesHeld(), 0u);
 }
 
 TEST(StreamFuser, AFailedSolveResetsTheStream) {
