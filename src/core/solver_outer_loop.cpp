@@ -64,8 +64,11 @@ void SolverImpl::runLevel(const PreparedLevel& level, bool finest,
   double best = backend_->energy(level, terms, s.n0, threads_);
   double reached = best + correction;
   const double energy_seconds = secondsSince(level_start);
-  // What closing an outer step costs (normalize + energy), for the budget.
-  double finish_seconds = 1.5 * secondsSince(level_start);
+  // What closing an outer step costs (normalize + energy), for the budget;
+  // with the guidance an accepted step also reweights and measures E again,
+  // about twice what the level's start took.
+  double finish_seconds =
+      (guidance != nullptr ? 2.0 : 1.5) * secondsSince(level_start);
   if (finest) {
     report.initial_energy = reached;
     recordEnergy(report, reached);
