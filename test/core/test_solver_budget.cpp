@@ -42,6 +42,13 @@ SolverSettings twoHundredIterationsUnderABudget() {
   return settings;
 }
 
+/// The same with a cold-start budget of 2 s too.
+SolverSettings twoHundredIterationsUnderTwoBudgets() {
+  SolverSettings settings = twoHundredIterationsUnderABudget();
+  settings.cold_start_budget_ms = 2000.0;
+  return settings;
+}
+
 /// The next solve's frame began 10 s ago: its budget is spent before the
 /// solve starts.
 void spendTheFrameBudget(Solver& solver) {
@@ -117,14 +124,13 @@ TEST(Solver, StreamColdStartRunsUnderItsOwnBudget) {
 }
 
 /// A stream's cold start under cold_start_budget_ms sets aside what the last
-/// one's tail took (the finest level's start and the output), at most half
-/// of the budget; one-shot solves and warm frames neither use nor change
-/// that figure.
+/// one's tail took (the levels left out, the finest level's start and the
+/// output), at most half of the budget; one-shot solves and warm frames neither
+/// use nor change that figure.
 TEST(Solver, AStreamColdStartSetsAsideTheLastOnesTail) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
-  SolverSettings settings = twoHundredIterationsUnderABudget();
-  settings.cold_start_budget_ms = 2000.0;
+  SolverSettings settings = twoHundredIterationsUnderTwoBudgets();
   Solver solver(settings);
   SolveReport report;
   SolverState first;
@@ -168,8 +174,7 @@ TEST(Solver, AStreamColdStartSetsAsideTheLastOnesTail) {
 TEST(Solver, ABudgetCutColdStartGoesOnConvergingInTheWarmFrames) {
   NormalMap gt;
   FusionProblem problem = noisyTwoPlanes(64, 48, 0.5, &gt);
-  SolverSettings settings = twoHundredIterationsUnderABudget();
-  settings.cold_start_budget_ms = 2000.0;
+  SolverSettings settings = twoHundredIterationsUnderTwoBudgets();
   Solver solver(settings);
   SolveReport report;
   SolverState stream;
