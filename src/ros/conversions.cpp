@@ -122,11 +122,9 @@ std::string checkMinimumSize(const sensor_msgs::Image& msg,
 
 std::string checkMaximumSize(const sensor_msgs::Image& msg,
                              const MessageLimits& limits) {
+  if (limits.allows(msg.width, msg.height)) return std::string();
   const std::uint64_t pixels =
       static_cast<std::uint64_t>(msg.width) * msg.height;
-  if (limits.max_pixels == 0 || pixels <= limits.max_pixels) {
-    return std::string();
-  }
   std::ostringstream text;
   text << "a " << msg.width << "x" << msg.height << " image (" << pixels
        << " pixels) is larger than max_pixels = " << limits.max_pixels

@@ -446,9 +446,9 @@ void DepthToNormalsNodelet::addColourCamera(
                      std::to_string(info.height) +
                      "; expected the colour image's size");
   }
-  const std::uint64_t pixels =
-      static_cast<std::uint64_t>(info.width) * info.height;
-  if (limits_.max_pixels > 0 && pixels > limits_.max_pixels) {
+  if (!limits_.allows(info.width, info.height)) {
+    const std::uint64_t pixels =
+        static_cast<std::uint64_t>(info.width) * info.height;
     throw InputError(name + ": " + std::to_string(pixels) +
                      " pixels; expected at most max_pixels = " +
                      std::to_string(limits_.max_pixels));

@@ -237,9 +237,11 @@ void FusionPipeline::resetWarmStart() { fuser_.reset(); }
 bool FusionPipeline::reserveFor(int width, int height, double* seconds) {
   const bool live =
       settings_.warm_start && settings_.solver.time_budget_ms > 0.0;
+  MessageLimits limits;
+  limits.max_pixels = static_cast<std::uint64_t>(settings_.max_pixels);
   if (!live || width < 2 || height < 2 ||
-      static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height) >
-          static_cast<std::uint64_t>(settings_.max_pixels)) {
+      !limits.allows(static_cast<std::uint64_t>(width),
+                     static_cast<std::uint64_t>(height))) {
     return false;
   }
   *seconds =

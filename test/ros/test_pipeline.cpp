@@ -268,6 +268,10 @@ TEST(Pipeline, ReservesALiveStreamsBuffersBeforeTheFirstSet) {
     EXPECT_TRUE(std::equal(x.data(), x.data() + 3 * x.pixelCount(), y.data()))
         << "set at " << stamp;
   }
+  // max_pixels 0: no bound, any size is reserved.
+  fixture.settings.max_pixels = 0;
+  FusionPipeline unbounded(fixture.settings, TopicNames::defaults(2));
+  EXPECT_TRUE(unbounded.reserveFor(64, 48, &seconds));
   // Not live: warm starts off, or no time budget.
   fixture.settings.warm_start = false;
   FusionPipeline one_shot(fixture.settings, TopicNames::defaults(2));

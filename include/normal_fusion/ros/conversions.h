@@ -21,6 +21,11 @@ namespace node {
 struct MessageLimits {
   /// Most pixels an image may have (0 = no bound).
   std::uint64_t max_pixels = kDefaultMaxPixels;
+
+  /// True when a width x height image is within max_pixels.
+  bool allows(std::uint64_t width, std::uint64_t height) const {
+    return max_pixels == 0 || width * height <= max_pixels;
+  }
 };
 
 // The input checks are tables of named rules (conversions.cpp), applied in
