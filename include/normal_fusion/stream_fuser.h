@@ -198,6 +198,9 @@ class StreamFuser {
   /// cannot be used.
   bool applyRotation(const CameraIntrinsics& K, const FrameRotation& rotation,
                      std::string* reason, double* seconds, bool* motion_warped);
+  /// Forgets the previous frame (reset()); with `keep_buffers` the state's
+  /// buffers keep their memory.
+  void forget(bool keep_buffers);
   /// Keeps `depth_m` (or forgets the previous one) for the next frame.
   void keepDepth(const ScalarMap* depth_m, const FusionProblem& frame);
   /// The inputs' temporal averages for this frame; restarted unless

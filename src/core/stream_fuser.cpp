@@ -73,9 +73,15 @@ void StreamFuser::setSettings(const StreamSettings& settings) {
   settings_ = settings;
 }
 
-void StreamFuser::reset() {
+void StreamFuser::reset() { forget(false); }
+
+void StreamFuser::forget(bool keep_buffers) {
   has_previous_ = false;
-  state_.clear();
+  if (keep_buffers) {
+    state_.clearKeepingCapacity();
+  } else {
+    state_.clear();
+  }
   temporal_.reset();
   averages_current_ = false;
   has_previous_depth_ = false;
@@ -332,7 +338,7 @@ double StreamFuser::reserve(int width, int height, int num_inputs,
     throw InputError(text.str());
   }
   const auto start = std::chrono::steady_clock::now();
-  reset();
+  forget(true);
   // A flat wall facing the camera, grey, seen by every input but for every
   // 8th pixel (holes put a cold start on the pyramid, as a stream's is):
   // the solves take the stream's own paths and end fast.
@@ -386,11 +392,7 @@ double StreamFuser::reserve(int width, int height, int num_inputs,
     }
   }
   // Forgotten, the memory kept: the next frame starts the stream.
-  temporal_.reset();
-  state_.clearKeepingCapacity();
-  has_previous_ = false;
-  has_previous_depth_ = false;
-  averages_current_ = false;
+  forget(true);
   report_ = SolveReport();
   return secondsSince(start);
 }
