@@ -23,6 +23,7 @@
 #include "bench_util.h"
 #include "eval/synthetic.h"
 #include "normal_fusion/detail/dynamic_guidance.h"
+#include "normal_fusion/detail/face_correction.h"
 #include "normal_fusion/detail/kernel_backend.h"
 #include "normal_fusion/detail/noise_estimate.h"
 #include "normal_fusion/detail/solver_internal.h"
@@ -117,6 +118,9 @@ class PartsRun {
       {"warp: rotation, duals rotated (kRotate: a state still converging)",
        {},
        {}},
+      {"face correction: faces and E (FaceCorrection::begin)", {}, {}},
+      {"face correction: the model (G and M)", {}, {}},
+      {"face correction: one step (model, solve, line search)", {}, {}},
       {"live frame (StreamFuser::fuse, budget 33 ms)", {}, {}},
   };
   nf::SolverSettings settings_;
@@ -269,6 +273,41 @@ void PartsRun::frame(const nf::FusionProblem& problem,
         terms.penalty = settings_.penalty;
         in::kernelBackend(settings_.backend)
             .energy(level, terms, filled_normals, threads);
+      });
+  // The face correction's parts on the refinement's start.
+  in::EnergyTerms terms;
+  terms.huber_eps = settings_.huber_eps;
+  terms.penalty = settings_.penalty;
+  const in::FaceCorrection::EnergyFunction energy_of =
+      [&](const nf::PlanarImage& n) {
+        return in::kernelBackend(settings_.backend)
+            .energy(level, terms, n, threads);
+      };
+  in::FaceCorrection faces;
+  faces.reserve(level.width, level.height, threads);
+  time(
+      16, [] {},
+      [&] {
+        faces.begin(filled_normals, settings_.warm_face_degrees, energy_of,
+                    threads);
+      });
+  time(
+      17, [] {},
+      [&] {
+        faces.buildModel(level, terms.huber_eps, terms.penalty, filled_normals,
+                         threads);
+      });
+  nf::PlanarImage stepped;
+  time(
+      18,
+      [&] {
+        stepped = filled_normals;
+        faces.begin(stepped, settings_.warm_face_degrees, energy_of, threads);
+      },
+      [&] {
+        faces.step(level, terms.huber_eps, terms.penalty,
+                   settings_.visibility == nf::VisibilityMode::kSoft, energy_of,
+                   stepped, threads);
       });
   for (const bool plane : {false, true}) {
     time(

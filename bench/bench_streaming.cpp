@@ -113,6 +113,9 @@ struct Options {
   // --refine-radius R: the local refinement's dilation (default: the
   // solver's).
   int refine_radius = -1;
+  // --face-steps N: the face correction's steps (default: the solver's; 0 =
+  // off).
+  int face_steps = -1;
   // --busy-threads N: N threads that spin for the whole run, as other work
   // on the machine would (the solver gets the cores that are left over).
   int busy_threads = 0;
@@ -164,6 +167,8 @@ bool parseOptions(int argc, char** argv, Options* o) {
       o->iterations = static_cast<int>(value);
     else if (key == "--refine")
       o->refine = static_cast<int>(value);
+    else if (key == "--face-steps")
+      o->face_steps = static_cast<int>(value);
     else if (key == "--refine-radius")
       o->refine_radius = static_cast<int>(value);
     else if (key == "--adaptive-threads")
@@ -234,6 +239,7 @@ RunSettings runSettings(const Options& o) {
   live.max_total_inner_iterations = o.iterations > 0 ? o.iterations : 100000;
   if (o.refine >= 0) live.warm_refine_iterations = o.refine;
   if (o.refine_radius >= 0) live.warm_refine_radius = o.refine_radius;
+  if (o.face_steps >= 0) live.warm_face_steps = o.face_steps;
   live.adaptive_refine_threads = o.adaptive_threads == 1;
   if (o.cold_start_budget_ms >= 0.0) {
     live.cold_start_budget_ms = o.cold_start_budget_ms;
@@ -276,7 +282,8 @@ void printHeader(const Options& o, const nf::SolverSettings& live) {
       "refine ms | whole-image its (outer steps / rejected) | refined px | "
       "refine its (on one thread) | warm | PSNR live (dB) "
       "| PSNR converged (dB) | deficit (dB) | PSNR warm start (dB) | PSNR "
-      "warped ground truth (dB) | energy gap to converged (%%) |");
+      "warped ground truth (dB) | energy gap to converged (%%) | face "
+      "correction: steps (kept) | face correction ms |");
   for (int cap : o.continue_caps) {
     std::printf(" deficit after %d more its (dB) |", cap);
   }
@@ -287,7 +294,7 @@ void printHeader(const Options& o, const nf::SolverSettings& live) {
   }
   std::printf(
       "\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---:|---:|"
-      "---:|---:|---:|---:|");
+      "---:|---:|---:|---:|---:|---:|");
   for (std::size_t c = 0; c < o.continue_caps.size(); ++c) std::printf("---:|");
   if (!o.continue_caps.empty()) std::printf("---:|");
   std::printf("\n");
@@ -419,7 +426,8 @@ void StreamRun::frame(int k) {
   worst_gap_ = std::max(worst_gap_, gap);
   std::printf(
       "| %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %d (%d / %d) | %d | "
-      "%d (%d) | %s | %.2f | %.2f | %.3f | %.2f | %.2f | %.3f |",
+      "%d (%d) | %s | %.2f | %.2f | %.3f | %.2f | %.2f | %.3f | %d (%d) | "
+      "%.1f |",
       k, ms, 1e3 * (result.average_seconds + result.warp_seconds),
       1e3 * report.seconds, 1e3 * report.prepare_seconds,
       1e3 * report.warm_start_seconds, 1e3 * report.refine_seconds,
@@ -427,7 +435,8 @@ void StreamRun::frame(int k) {
       report.rejected_outer_steps, report.refined_pixels,
       report.refine_iterations, report.refine_single_thread_iterations,
       report.warm_started ? "yes" : "no", psnr_live, psnr_best, deficit,
-      psnr_start, psnr_warped_gt, gap);
+      psnr_start, psnr_warped_gt, gap, report.face_steps,
+      report.face_steps_accepted, 1e3 * report.face_seconds);
   printContinued(problem, k, psnr_best);
   std::printf("\n");
   std::fflush(stdout);

@@ -164,6 +164,16 @@ struct SolverSettings {
   /// pixels, not the image. 0 = off.
   int warm_refine_iterations = settings_default::warm_refine_iterations;
   int warm_refine_radius = settings_default::warm_refine_radius;
+  /// Face correction of a warm start, after the local refinement: the
+  /// faces of the map (4-connected pixels whose neighbours' normals lie
+  /// within warm_face_degrees, of at least 64 pixels; the 64 largest) each
+  /// turn by one tangent direction, found by warm_face_steps damped Newton
+  /// steps on a quadratic model of E, each kept only when E falls (under a
+  /// time budget, as many as fit in the time the refinement leaves). It
+  /// corrects the error over whole faces that a moving camera's stream
+  /// gathers and the local refinement does not reach. 0 = off.
+  int warm_face_steps = settings_default::warm_face_steps;
+  double warm_face_degrees = settings_default::warm_face_degrees;
 
   // Iterations and stopping.
   int inner_iterations =

@@ -69,6 +69,14 @@ struct SolveReport {
   /// Of these, the ones run on one thread instead of num_threads because
   /// one was measured to be faster (SolverSettings::adaptive_refine_threads).
   int refine_single_thread_iterations = 0;
+  /// The face correction after it (SolverSettings::warm_face_steps): the
+  /// faces it turned, its steps (and of these the ones kept), by how much
+  /// it lowered E and its time.
+  int corrected_faces = 0;
+  int face_steps = 0;
+  int face_steps_accepted = 0;
+  double face_energy_decrease = 0.0;
+  double face_seconds = 0.0;
   /// E at the finest level: start, then each accepted outer step. Empty
   /// (and initial_energy, final_energy NaN) when the whole-image step was
   /// left out after a warm start's local refinement: always under a time

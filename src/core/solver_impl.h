@@ -10,6 +10,7 @@
 
 #include "normal_fusion/detail/deadline.h"
 #include "normal_fusion/detail/dynamic_guidance.h"
+#include "normal_fusion/detail/face_correction.h"
 #include "normal_fusion/detail/kernel_backend.h"
 #include "normal_fusion/detail/solver_internal.h"
 #include "normal_fusion/solver.h"
@@ -142,6 +143,8 @@ class SolverImpl {
   /// Local refinement of a warm start (SolverSettings::warm_refine_*):
   /// majorize-minimize on the active pixels, every other pixel fixed.
   void refineActive(const internal::PreparedLevel& level, SolveReport& report);
+  /// The face correction after it (SolverSettings::warm_face_steps).
+  void correctFaces(const internal::PreparedLevel& level, SolveReport& report);
 
   // solver_report.cpp: the report and the buffers.
 
@@ -200,6 +203,17 @@ class SolverImpl {
   int remaining_inner_ = 0;
   /// The local refinement's thread count per step (kept across frames).
   internal::RefineThreadChooser refine_threads_;
+  internal::FaceCorrection faces_;  ///< correctFaces()' state and buffers
+  /// What the last face-correction set-up (faces and E) and step took (for
+  /// the budget; 0: not timed yet).
+  double face_begin_seconds_ = 0.0;
+  double face_step_seconds_ = 0.0;
+  /// The safety factor on the correction's last times, what they shrink by
+  /// on each frame that skips it, and the share of the budget it needs left
+  /// before it is first timed.
+  static constexpr double kFaceMargin = 1.25;
+  static constexpr double kFaceEstimateDecay = 0.9;
+  static constexpr double kFaceFirstShare = 0.3;
 };
 
 }  // namespace normal_fusion

@@ -225,7 +225,72 @@ void SolverImpl::startWarm(const PreparedLevel& level, SolverState& out,
   }
   report.warm_start_seconds = secondsSince(warm_start);
   if (!cancelled()) refineActive(level, report);
-  report.refine_seconds = secondsSince(warm_start) - report.warm_start_seconds;
+  if (!cancelled() && settings_.warm_face_steps > 0) {
+    correctFaces(level, report);
+  }
+  report.refine_seconds = secondsSince(warm_start) - report.warm_start_seconds -
+                          report.face_seconds;
+}
+
+void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
+  const Clock::time_point start = Clock::now();
+  const internal::EnergyTerms terms = energyTerms();
+  // One pointer to what E needs: small enough for std::function to hold
+  // without a heap allocation (a live frame allocates nothing).
+  struct EnergyContext {
+    const internal::KernelBackend* backend;
+    const PreparedLevel* level;
+    const internal::EnergyTerms* terms;
+    int threads;
+  } const context{backend_, &level, &terms, threads_};
+  const EnergyContext* ctx = &context;
+  const internal::FaceCorrection::EnergyFunction energy_of =
+      [ctx](const PlanarImage& n) {
+        return ctx->backend->energy(*ctx->level, *ctx->terms, n, ctx->threads);
+      };
+  // Under a budget the correction takes only the time the refinement left
+  // (what it leaves out does not count as the budget's: budget_exhausted
+  // stays the refinement's): it starts when its set-up and one step fit
+  // (their last times with kFaceMargin). Before they are timed they stand at
+  // kFaceFirstShare of the budget together, a step twice the set-up.
+  if (face_begin_seconds_ == 0.0 && deadline_.active()) {
+    face_begin_seconds_ =
+        kFaceFirstShare * 1e-3 * settings_.time_budget_ms / (3.0 * kFaceMargin);
+    face_step_seconds_ = 2.0 * face_begin_seconds_;
+  }
+  if (!deadline_.fits(
+          start, kFaceMargin * (face_begin_seconds_ + face_step_seconds_))) {
+    // Times of a slow phase or of a first call would keep it out for good;
+    // shrunk on each frame it is skipped, they are measured again later.
+    face_begin_seconds_ *= kFaceEstimateDecay;
+    face_step_seconds_ *= kFaceEstimateDecay;
+    return;
+  }
+  const Clock::time_point begin_start = Clock::now();
+  report.corrected_faces =
+      faces_.begin(state_.n0, settings_.warm_face_degrees, energy_of, threads_);
+  face_begin_seconds_ = secondsSince(begin_start);
+  const double face_energy = faces_.energy();
+  // Each step is kept only when E falls.
+  for (int k = 0; k < settings_.warm_face_steps && report.corrected_faces > 0;
+       ++k) {
+    const Clock::time_point step_start = Clock::now();
+    if (cancelled()) break;
+    if (!deadline_.fits(step_start, kFaceMargin * face_step_seconds_)) {
+      if (k == 0) face_step_seconds_ *= kFaceEstimateDecay;
+      break;
+    }
+    if (faces_.step(level, terms.huber_eps, terms.penalty,
+                    settings_.visibility == VisibilityMode::kSoft, energy_of,
+                    state_.n0, threads_)) {
+      report.face_steps_accepted += 1;
+    }
+    report.face_steps += 1;
+    face_step_seconds_ = secondsSince(step_start);
+  }
+  report.face_energy_decrease =
+      report.corrected_faces > 0 ? face_energy - faces_.energy() : 0.0;
+  report.face_seconds = secondsSince(start);
 }
 
 void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {

@@ -62,7 +62,7 @@ std::size_t SolverImpl::bytesHeld() const {
       refine_.gathered.bytesHeld() + internal::bytesHeld(edge_scratch_map_) +
       internal::bytesHeld(fill_pending_) + internal::bytesHeld(unknown_) +
       internal::bytesHeld(refine_.iterate_saved) + coarse_p_h_.bytesHeld() +
-      coarse_p_v_.bytesHeld() + cold_filter_.bytesHeld();
+      coarse_p_v_.bytesHeld() + cold_filter_.bytesHeld() + faces_.bytesHeld();
   for (const PlanarImage& q : coarse_q_) bytes += q.bytesHeld();
   for (const internal::PreparedLevel& level : levels_) {
     bytes += level.bytesHeld();
@@ -89,6 +89,7 @@ void SolverImpl::fitBuffers(int W, int H) {
   internal::releaseIfOversized(edge_scratch_map_, N);
   internal::releaseIfOversized(fill_pending_, N);
   internal::releaseIfOversized(refine_.iterate_saved, 3 * N);
+  faces_.fit(W, H);
   // The refinement's buffers hold room for up to every pixel of the image
   // they were sized for (ActiveSet: its mask, one entry per pixel).
   if (N < refine_.active.mask.capacity() / 4) {
@@ -120,6 +121,7 @@ void SolverImpl::preallocateRefinement(int W, int H, int num_inputs,
   unknown_.resize(static_cast<std::size_t>(W) * H);
   edge_scratch_map_.resize(static_cast<std::size_t>(W) * H);
   fill_pending_.reserve(static_cast<std::size_t>(W) * H);
+  if (settings_.warm_face_steps > 0) faces_.reserve(W, H, threads_);
 }
 
 }  // namespace normal_fusion

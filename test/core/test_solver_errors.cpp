@@ -104,6 +104,12 @@ TEST(SolverErrors, BadSettingsRaiseParameterError) {
   s.warm_refine_radius = 17;
   expect_bad(s, "warm_refine_radius");
   s = SolverSettings();
+  s.warm_face_steps = -1;
+  expect_bad(s, "warm_face_steps");
+  s = SolverSettings();
+  s.warm_face_degrees = 0.0;
+  expect_bad(s, "warm_face_degrees");
+  s = SolverSettings();
   s.edges.w_min = 2.0;
   expect_bad(s, "w_min");
   s = SolverSettings();

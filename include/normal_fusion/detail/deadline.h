@@ -36,6 +36,12 @@ class Deadline {
            step_start + toDuration(kMargin * expected_seconds) <= end_;
   }
 
+  /// Work of `seconds` begun at `start` ends by the deadline (without
+  /// kMargin: for work that brings its own).
+  bool fits(Clock::time_point start, double seconds) const {
+    return !active_ || start + toDuration(seconds) <= end_;
+  }
+
   /// A whole level whose least cost is `level_seconds` (0: not known yet)
   /// fits in what is left, with kMargin.
   bool allowsLevel(double level_seconds) const {
