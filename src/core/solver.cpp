@@ -72,7 +72,7 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   }
   if (!use_warm && settings_.warm_refine_iterations > 0) {
     // For 1/16 of the pixels; they grow if a frame needs more.
-    preallocateRefinement(W, H, L, W * H / 16);
+    preallocateRefinement(W, H, L, W * H / 16, false);
   }
   report.warm_started = use_warm;
   warm_converging_ = use_warm && out.converging;
@@ -374,7 +374,8 @@ void Solver::reserveRefinement(int width, int height, int num_inputs,
     throw InputError(text.str());
   }
   impl_->preallocateRefinement(width, height, num_inputs,
-                               std::clamp(active_pixels, 0, width * height));
+                               std::clamp(active_pixels, 0, width * height),
+                               true);
 }
 
 void Solver::setBudgetStart(std::chrono::steady_clock::time_point frame_start) {

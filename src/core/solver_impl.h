@@ -68,7 +68,10 @@ class SolverImpl {
   /// Sizes the local refinement's buffers for `active_pixels` refined
   /// pixels: on a cold start for the warm starts to come, and from
   /// Solver::reserveRefinement().
-  void preallocateRefinement(int W, int H, int num_inputs, int active_pixels);
+  /// `with_faces`: the face correction's buffers too (a cold solve leaves
+  /// them to its stream's first warm frame or to Solver::reserveRefinement).
+  void preallocateRefinement(int W, int H, int num_inputs, int active_pixels,
+                             bool with_faces);
 
   /// Solver::requestCancel(): set by the caller (any thread), read by the
   /// solve, never cleared by it.

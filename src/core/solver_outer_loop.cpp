@@ -226,6 +226,8 @@ void SolverImpl::startWarm(const PreparedLevel& level, SolverState& out,
   report.warm_start_seconds = secondsSince(warm_start);
   if (!cancelled()) refineActive(level, report);
   if (!cancelled() && settings_.warm_face_steps > 0) {
+    // Sized once per size (a stream's first warm frame, unless reserved).
+    faces_.reserve(level.width, level.height, threads_);
     correctFaces(level, report);
   }
   report.refine_seconds = secondsSince(warm_start) - report.warm_start_seconds -

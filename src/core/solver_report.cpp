@@ -115,13 +115,15 @@ void SolverImpl::releaseUnusedLevels(int used) {
 }
 
 void SolverImpl::preallocateRefinement(int W, int H, int num_inputs,
-                                       int active_pixels) {
+                                       int active_pixels, bool with_faces) {
   refine_.active.preallocate(W, H);
   refine_.gathered.preallocate(W, H, num_inputs, active_pixels);
   unknown_.resize(static_cast<std::size_t>(W) * H);
   edge_scratch_map_.resize(static_cast<std::size_t>(W) * H);
   fill_pending_.reserve(static_cast<std::size_t>(W) * H);
-  if (settings_.warm_face_steps > 0) faces_.reserve(W, H, threads_);
+  if (with_faces && settings_.warm_face_steps > 0) {
+    faces_.reserve(W, H, threads_);
+  }
 }
 
 }  // namespace normal_fusion

@@ -205,6 +205,63 @@ TEST(FaceCorrection, LabelsAsAFloodFillOnAnyThreadCount) {
   }
 }
 
+/// A map of more faces than kMaxFaces: the largest are kept (of equal
+/// sizes, the first in raster order), the rest are left out.
+TEST(FaceCorrection, KeepsTheLargestFaces) {
+  const int block = 10, blocks = 10, W = block * blocks, H = block * blocks;
+  ASSERT_GT(blocks * blocks, internal::kMaxFaces);
+  PlanarImage n(W, H, 3);
+  const double axis[3] = {0.0, 1.0, 0.0};
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      // A checkerboard of blocks 10 degrees apart; the blocks of the first
+      // band are 20 rows tall (200 pixels), the others 10 (100 pixels).
+      const int band = y < 2 * block ? 0 : y / block - 1;
+      float v[3] = {0.0f, 0.0f, -1.0f};
+      turn(axis, (x / block + band) % 2 == 0 ? 0.0 : 10.0, v);
+      for (int k = 0; k < 3; ++k) n.at(k, y, x) = v[k];
+    }
+  }
+  std::vector<int> label, parent;
+  const int all = internal::labelFaces(n, 2.0, label, parent, 2);
+  ASSERT_GT(all, internal::kMaxFaces);
+  internal::FaceCorrection faces;
+  faces.reserve(W, H, 2);
+  int calls = 0;
+  const internal::FaceCorrection::EnergyFunction energy_of =
+      [&](const PlanarImage&) {
+        ++calls;
+        return 1.0;
+      };
+  ASSERT_EQ(faces.begin(n, 2.0, energy_of, 2), internal::kMaxFaces);
+  EXPECT_EQ(calls, 1);
+  std::vector<int> size(internal::kMaxFaces, 0);
+  int left_out = 0;
+  for (std::size_t i = 0; i < label.size(); ++i) {
+    const int f = faces.labels()[i];
+    ASSERT_GE(f, -1);
+    ASSERT_LT(f, internal::kMaxFaces);
+    if (f < 0) {
+      ++left_out;
+    } else {
+      ++size[static_cast<std::size_t>(f)];
+      // A kept face is one face of the full labelling.
+      ASSERT_GE(label[i], 0);
+    }
+  }
+  // The first band's 10 faces of 200 pixels are kept, then the first of the
+  // faces of 100 pixels in raster order; the rest are left out.
+  for (int bx = 0; bx < blocks; ++bx) {
+    const int f = faces.labels()[static_cast<std::size_t>(bx * block)];
+    ASSERT_GE(f, 0) << bx;
+    EXPECT_EQ(size[static_cast<std::size_t>(f)], 2 * block * block) << bx;
+  }
+  EXPECT_GE(faces.labels()[static_cast<std::size_t>(2 * block * W)], 0);
+  EXPECT_EQ(faces.labels().back(), -1);
+  EXPECT_EQ(left_out, W * H - blocks * 2 * block * block -
+                          (internal::kMaxFaces - blocks) * block * block);
+}
+
 /// A level of two planes seen by one clean input (uniform edge and data
 /// weights, L2 data term), the left plane's warm map tilted by `tilt`.
 struct TiltedFace {
