@@ -70,6 +70,13 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
                     budget_ms - 1e3 * report.cold_start_tail_reserved_seconds);
     report.cold_start_budget_used = true;
   }
+  // A request made while the inputs were prepared ends the solve before the
+  // refinement's buffers and the pyramid are sized (at 1920x1440 they take
+  // a noticeable share of the deadline a cancel is held to).
+  if (cancelled()) {
+    finishCancelledBeforeStart(report, start);
+    return;
+  }
   if (!use_warm && settings_.warm_refine_iterations > 0) {
     // For 1/16 of the pixels; they grow if a frame needs more.
     preallocateRefinement(W, H, L, W * H / 16, false);
