@@ -305,16 +305,6 @@ TiltedFace tiltedFace(int W, int H, double tilt) {
   return t;
 }
 
-double meanAngleDeg(const PlanarImage& a, const PlanarImage& b) {
-  double sum = 0.0;
-  for (std::size_t i = 0; i < a.pixelCount(); ++i) {
-    double dot = 0.0;
-    for (int k = 0; k < 3; ++k) dot += a.plane(k)[i] * b.plane(k)[i];
-    sum += std::acos(std::min(1.0, std::max(-1.0, dot))) * 180.0 / kPi;
-  }
-  return sum / static_cast<double>(a.pixelCount());
-}
-
 /// The model's G is the face sum of tangentEnergyGradient(), and G . D and
 /// D^T M D are E's first and second derivatives along a turn of one face:
 /// exact for the squared data term without links between the faces (flat
@@ -423,7 +413,7 @@ TEST(FaceCorrection, StepsNeverRaiseEAndTurnATiltedFaceBack) {
   PlanarImage n = t.warm;
   ASSERT_EQ(faces.begin(n, 2.0, energy_of), 2);
   const double start_energy = faces.energy();
-  const double start_angle = meanAngleDeg(n, t.data);
+  const double start_angle = angularError(n, t.data).mean_deg;
   // Half the map turned by 3 degrees about x, 2.8 degrees off its data.
   EXPECT_NEAR(start_angle, 1.41, 0.01);
   double previous = start_energy;
@@ -440,7 +430,7 @@ TEST(FaceCorrection, StepsNeverRaiseEAndTurnATiltedFaceBack) {
   EXPECT_GE(accepted, 3);
   EXPECT_LT(faces.energy(), start_energy);
   // The tilted face is back on its data; the right one stays there.
-  EXPECT_LT(meanAngleDeg(n, t.data), 0.1 * start_angle);
+  EXPECT_LT(angularError(n, t.data).mean_deg, 0.1 * start_angle);
   for (std::size_t i = 0; i < n.pixelCount(); ++i) {
     const float len2 = n.plane(0)[i] * n.plane(0)[i] +
                        n.plane(1)[i] * n.plane(1)[i] +
