@@ -164,7 +164,7 @@ class Solver {
   void setBudgetStart(std::chrono::steady_clock::time_point frame_start);
 
   /// Convenience: cold start, returns the fused normals (empty when
-  /// cancelled before the iterations began; see requestCancel()).
+  /// cancelled before the finest level began; see requestCancel()).
   NormalMap solve(const FusionProblem& problem, SolveReport* report = nullptr);
 
   /// Cancellation. Asks the solve in progress to stop, and every later
@@ -178,16 +178,17 @@ class Solver {
   /// reference backend), so it returns within about one iteration of the
   /// request. It then returns normally (no exception: the state stays
   /// usable) with SolveReport::cancelled set, and:
-  /// - before the iterations began (requested before the call, or while
-  ///   the inputs and the pyramid were prepared): with `state` unchanged
-  ///   (a request before the call: at once, the problem not even
-  ///   validated);
+  /// - before the finest level began (requested before the call, while
+  ///   the inputs and the pyramid were prepared, or while a coarser level
+  ///   ran): with `state` unchanged (a request before the call: at once,
+  ///   the problem not even validated);
   /// - later: `state` holds the problem's size, unit normals and finite
   ///   duals: the last accepted outer step of the finest level, or the
   ///   start it had reached (the warm start as made usable so far, or the
   ///   cold start / the upsampled coarser level). Iterations after that
-  ///   step are dropped. Report entries of what did not run stay 0 (energies
-  ///   empty and NaN when the finest level's were not measured).
+  ///   step are dropped.
+  /// Report entries of what did not run stay 0 (energies empty and NaN when
+  /// the finest level's were not measured).
   /// Uncancelled solves are unchanged by the checks (the same bits).
   ///
   /// The solver never withdraws a request itself, in particular not when a

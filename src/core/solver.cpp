@@ -97,13 +97,15 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   }
   report.prepare_seconds = secondsSince(start);
 
-  // Cancelled from here on, the finest level still sets up its start (cheap:
-  // a pass or two, no iterations), so that `out` receives unit normals of the
-  // problem's size.
   double tail_seconds = 0.0;  // see cold_start_tail_seconds_
   for (int li = num_levels - 1; li >= 0; --li) {
-    // Cancelled: the finest level starts from the last level that ran.
-    if (li > 0 && li + 1 < num_levels && cancelled()) continue;
+    // Cancelled before the finest level starts: `out` is unchanged, since
+    // that start writes every buffer of the problem's size (fresh memory
+    // on a first solve: far longer than an iteration at large sizes).
+    if (li + 1 < num_levels && cancelled()) {
+      finishReport(report, start);
+      return;
+    }
     const Clock::time_point level_start = Clock::now();
     const PreparedLevel& level = levels_[li];
     state_.resize(level.width, level.height, level.num_inputs);
