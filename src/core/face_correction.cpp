@@ -165,6 +165,7 @@ void FaceCorrection::reserve(int width, int height, int threads) {
   const std::size_t S = 3 * kMaxFaces;
   gradient_.reserve(S);
   direction_.reserve(S);
+  directions_float_.reserve(S);
   hessian_.reserve(S * S);
   factor_.reserve(S * S);
   thread_sums_.reserve(modelDoubles(kMaxFaces) *
@@ -193,6 +194,7 @@ std::size_t FaceCorrection::bytesHeld() const {
   return internal::bytesHeld(label_) + internal::bytesHeld(parent_) +
          internal::bytesHeld(face_size_) + internal::bytesHeld(face_order_) +
          internal::bytesHeld(gradient_) + internal::bytesHeld(direction_) +
+         internal::bytesHeld(directions_float_) +
          internal::bytesHeld(hessian_) + internal::bytesHeld(factor_) +
          internal::bytesHeld(thread_sums_) + internal::bytesHeld(row_scratch_) +
          trial_.bytesHeld();
@@ -489,37 +491,100 @@ bool FaceCorrection::solveDamped(double damping) {
   return true;
 }
 
+namespace {
+
+/// One row of W pixels: on a face f (label >= 0) v = n0 + alpha (d_f -
+/// (d_f . n0) n0), normalized, then (soft mode) projected onto the visible
+/// half-space of the pixel's ray as projectVisible() does; elsewhere n0.
+/// `dirs` holds d_f's entries per face (x, y, z); written without branches
+/// so that it vectorizes (the directions gathered by label).
+NF_MULTIVERSION void rotateRow(const float* __restrict m0,
+                               const float* __restrict m1,
+                               const float* __restrict m2,
+                               const int* __restrict label, int W, int y,
+                               const float* __restrict dirs, float alpha,
+                               bool soft_visibility, const double* K_inv,
+                               float* __restrict o0, float* __restrict o1,
+                               float* __restrict o2) {
+  // The ray's entries are affine in x: r_c = K_inv[3c] x + base_c.
+  const float base[3] = {static_cast<float>(K_inv[1] * y + K_inv[2]),
+                         static_cast<float>(K_inv[4] * y + K_inv[5]),
+                         static_cast<float>(K_inv[7] * y + K_inv[8])};
+  const float k0 = static_cast<float>(K_inv[0]),
+              k1 = static_cast<float>(K_inv[3]),
+              k2 = static_cast<float>(K_inv[6]);
+  // One loop per mode (no branch inside: it vectorizes).
+  auto pixel = [&](int x, bool soft) {
+    const int f = label[x];
+    const int at = 3 * std::max(f, 0);
+    const float d0 = dirs[at], d1 = dirs[at + 1], d2 = dirs[at + 2];
+    const float u0 = m0[x], u1 = m1[x], u2 = m2[x];
+    const float dot = d0 * u0 + d1 * u1 + d2 * u2;
+    float v0 = u0 + alpha * (d0 - dot * u0);
+    float v1 = u1 + alpha * (d1 - dot * u1);
+    float v2 = u2 + alpha * (d2 - dot * u2);
+    const float inv =
+        1.0f / std::sqrt(std::max(v0 * v0 + v1 * v1 + v2 * v2, 1e-30f));
+    v0 *= inv;
+    v1 *= inv;
+    v2 *= inv;
+    if (soft) {
+      const float xf = static_cast<float>(x);
+      const float r0 = k0 * xf + base[0];
+      const float r1 = k1 * xf + base[1];
+      const float r2 = k2 * xf + base[2];
+      const float rn = r0 * v0 + r1 * v1 + r2 * v2;
+      const float rr = r0 * r0 + r1 * r1 + r2 * r2;
+      const float p0 = v0 * rr - r0 * rn, p1 = v1 * rr - r1 * rn,
+                  p2 = v2 * rr - r2 * rn;
+      const float len = std::sqrt(p0 * p0 + p1 * p1 + p2 * p2);
+      // Facing the camera: unchanged; else the nearest visible normal, or
+      // -r / |r| where the projection vanishes.
+      const bool degenerate = len <= 1e-6f * rr;
+      const float scale = degenerate ? 0.0f : 1.0f / std::max(len, 1e-30f);
+      const float back = degenerate ? -1.0f / std::sqrt(rr) : 0.0f;
+      const bool away = rn > 0.0f;
+      v0 = away ? p0 * scale + r0 * back : v0;
+      v1 = away ? p1 * scale + r1 * back : v1;
+      v2 = away ? p2 * scale + r2 * back : v2;
+    }
+    const bool on_face = f >= 0;
+    o0[x] = on_face ? v0 : u0;
+    o1[x] = on_face ? v1 : u1;
+    o2[x] = on_face ? v2 : u2;
+  };
+  if (soft_visibility) {
+    for (int x = 0; x < W; ++x) pixel(x, true);
+  } else {
+    for (int x = 0; x < W; ++x) pixel(x, false);
+  }
+}
+
+}  // namespace
+
 void FaceCorrection::candidateAt(const PreparedLevel& level,
                                  bool soft_visibility, const PlanarImage& n0,
+                                 const std::vector<double>& direction,
                                  double alpha, PlanarImage& candidate,
-                                 int threads) const {
+                                 int threads) {
   const int W = level.width, H = level.height;
   candidate.resizeKeepingCapacity(W, H, 3);
+  // The faces' directions in float (0 for any face `direction` lacks).
+  const std::size_t S = 3 * static_cast<std::size_t>(faces_);
+  directions_float_.assign(std::max<std::size_t>(S, 3), 0.0f);
+  for (std::size_t k = 0; k < std::min(S, direction.size()); ++k) {
+    directions_float_[k] = static_cast<float>(direction[k]);
+  }
   const float a = static_cast<float>(alpha);
+  const double* K_inv = level.K_inv.data();
+  const float* dirs = directions_float_.data();
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const int f = label_[i];
-      float v[3] = {n0.plane(0)[i], n0.plane(1)[i], n0.plane(2)[i]};
-      if (f >= 0) {
-        // n0 + alpha u with the face's update u = (I - n0 n0^T) D_f.
-        const double* D = &direction_[3 * static_cast<std::size_t>(f)];
-        const float d[3] = {static_cast<float>(D[0]), static_cast<float>(D[1]),
-                            static_cast<float>(D[2])};
-        const float dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2];
-        for (int ch = 0; ch < 3; ++ch) v[ch] += a * (d[ch] - dot * v[ch]);
-        const float inv =
-            1.0f / std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        for (int ch = 0; ch < 3; ++ch) v[ch] *= inv;
-        if (soft_visibility) {
-          float r[3];
-          level.ray(x, y, r);
-          projectVisible(r, v);
-        }
-      }
-      for (int ch = 0; ch < 3; ++ch) candidate.plane(ch)[i] = v[ch];
-    }
+    const std::size_t row = static_cast<std::size_t>(y) * W;
+    rotateRow(n0.plane(0) + row, n0.plane(1) + row, n0.plane(2) + row,
+              label_.data() + row, W, y, dirs, a, soft_visibility, K_inv,
+              candidate.plane(0) + row, candidate.plane(1) + row,
+              candidate.plane(2) + row);
   }
 }
 
@@ -543,7 +608,7 @@ bool FaceCorrection::step(const PreparedLevel& level, double huber_eps,
   if (!(slope < 0.0)) return false;
   // The full step, or when it does not lower E the minimum of the parabola
   // through E(0), E'(0) = G . D and E(1).
-  candidateAt(level, soft_visibility, n0, 1.0, trial_, threads);
+  candidateAt(level, soft_visibility, n0, direction_, 1.0, trial_, threads);
   double e = energy_of(trial_);
   const double curvature = e - energy_ - slope;
   // Levenberg-Marquardt: trust the model more where it held.
@@ -553,7 +618,8 @@ bool FaceCorrection::step(const PreparedLevel& level, double huber_eps,
   if (!(e < energy_) && curvature > 0.0) {
     const double alpha = std::max(0.1, -slope / (2.0 * curvature));
     if (alpha < 1.0) {
-      candidateAt(level, soft_visibility, n0, alpha, trial_, threads);
+      candidateAt(level, soft_visibility, n0, direction_, alpha, trial_,
+                  threads);
       e = energy_of(trial_);
     }
   }

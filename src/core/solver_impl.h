@@ -4,6 +4,7 @@
 // start's local refinement; solver_report.cpp: the report and the memory).
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <vector>
@@ -211,6 +212,11 @@ class SolverImpl {
   /// the budget; 0: not timed yet).
   double face_begin_seconds_ = 0.0;
   double face_step_seconds_ = 0.0;
+  /// The fastest of those times (0: none yet): the estimates never shrink
+  /// below them. Measured for one size and thread count (face_timed_for_).
+  double face_begin_fastest_ = 0.0;
+  double face_step_fastest_ = 0.0;
+  std::array<int, 3> face_timed_for_{{0, 0, 0}};
   /// The safety factor on the correction's last times, what they shrink by
   /// on each frame that skips it, and the share of the budget it needs left
   /// before it is first timed.

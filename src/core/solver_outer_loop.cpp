@@ -255,6 +255,22 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
   // stays the refinement's): it starts when its set-up and one step fit
   // (their last times with kFaceMargin). Before they are timed they stand at
   // kFaceFirstShare of the budget together, a step twice the set-up.
+  const std::array<int, 3> timed_for{{level.width, level.height, threads_}};
+  if (timed_for != face_timed_for_) {
+    // Times of another size or thread count say nothing of these.
+    face_timed_for_ = timed_for;
+    face_begin_seconds_ = face_step_seconds_ = 0.0;
+    face_begin_fastest_ = face_step_fastest_ = 0.0;
+  }
+  // A time measured, and the fastest one.
+  auto timed = [](double seconds, double& last, double& fastest) {
+    last = seconds;
+    fastest = fastest > 0.0 ? std::min(fastest, seconds) : seconds;
+  };
+  // An estimate shrunk on a skipped frame, never below the fastest time.
+  auto shrink = [](double& estimate, double fastest) {
+    estimate = std::max(fastest, estimate * kFaceEstimateDecay);
+  };
   if (face_begin_seconds_ == 0.0 && deadline_.active()) {
     face_begin_seconds_ =
         kFaceFirstShare * 1e-3 * settings_.time_budget_ms / (3.0 * kFaceMargin);
@@ -263,15 +279,17 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
   if (!deadline_.fits(
           start, kFaceMargin * (face_begin_seconds_ + face_step_seconds_))) {
     // Times of a slow phase or of a first call would keep it out for good;
-    // shrunk on each frame it is skipped, they are measured again later.
-    face_begin_seconds_ *= kFaceEstimateDecay;
-    face_step_seconds_ *= kFaceEstimateDecay;
+    // shrunk on each frame it is skipped (down to the fastest seen, so that
+    // a run of skipped frames does not let it start where it cannot end in
+    // time), they are measured again later.
+    shrink(face_begin_seconds_, face_begin_fastest_);
+    shrink(face_step_seconds_, face_step_fastest_);
     return;
   }
   const Clock::time_point begin_start = Clock::now();
   report.corrected_faces =
       faces_.begin(state_.n0, settings_.warm_face_degrees, energy_of, threads_);
-  face_begin_seconds_ = secondsSince(begin_start);
+  timed(secondsSince(begin_start), face_begin_seconds_, face_begin_fastest_);
   const double face_energy = faces_.energy();
   // Each step is kept only when E falls.
   for (int k = 0; k < settings_.warm_face_steps && report.corrected_faces > 0;
@@ -279,7 +297,7 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
     const Clock::time_point step_start = Clock::now();
     if (cancelled()) break;
     if (!deadline_.fits(step_start, kFaceMargin * face_step_seconds_)) {
-      if (k == 0) face_step_seconds_ *= kFaceEstimateDecay;
+      if (k == 0) shrink(face_step_seconds_, face_step_fastest_);
       break;
     }
     if (faces_.step(level, terms.huber_eps, terms.penalty,
@@ -288,7 +306,7 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
       report.face_steps_accepted += 1;
     }
     report.face_steps += 1;
-    face_step_seconds_ = secondsSince(step_start);
+    timed(secondsSince(step_start), face_step_seconds_, face_step_fastest_);
   }
   report.face_energy_decrease =
       report.corrected_faces > 0 ? face_energy - faces_.energy() : 0.0;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <random>
 #include <vector>
 
 #include "normal_fusion/detail/face_correction.h"
@@ -310,6 +311,79 @@ TiltedFace tiltedFace(int W, int H, double tilt) {
 /// exact for the squared data term without links between the faces (flat
 /// faces, so the links inside one, which the model leaves out, do not
 /// change), above E's curvature (a majorizer's) for the L2 data term and the
+/// The candidate of a turn (the vectorized kernel) against the formula
+/// pixel by pixel with projectVisible(): on both faces of a map whose middle
+/// columns are noise (no face there: left as they are), directions large
+/// enough that many pixels turn away from the camera, in both visibility
+/// modes and for a step length below 1.
+TEST(FaceCorrection, CandidateIsTheTurnOfEachFace) {
+  const int W = 48, H = 36;
+  TiltedFace t = tiltedFace(W, H, 3.0);
+  PlanarImage n = t.warm;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> angle(-20.0, 20.0);
+  for (int y = 0; y < H; ++y) {
+    for (int x = W / 2 - 3; x < W / 2 + 3; ++x) {
+      float v[3] = {0.0f, 0.0f, -1.0f};
+      const double axis_x[3] = {1.0, 0.0, 0.0}, axis_y[3] = {0.0, 1.0, 0.0};
+      turn(axis_x, angle(rng), v);
+      turn(axis_y, angle(rng), v);
+      for (int k = 0; k < 3; ++k) n.at(k, y, x) = v[k];
+    }
+  }
+  const internal::FaceCorrection::EnergyFunction energy_of =
+      [&](const PlanarImage& m) {
+        return internal::energy(t.level, 0.05, DataPenalty::kL2, m, 1);
+      };
+  internal::FaceCorrection faces;
+  faces.reserve(W, H, 2);
+  ASSERT_EQ(faces.begin(n, 2.0, energy_of), 2);
+  // Turns of 80 degrees and more: near the image's sides the turned
+  // normals face away from the camera.
+  const std::vector<double> direction = {6.0, -1.0, 0.5, -8.0, 2.0, -1.0};
+  PlanarImage candidate;
+  for (const bool soft : {false, true}) {
+    for (const double alpha : {1.0, 0.35}) {
+      faces.candidateAt(t.level, soft, n, direction, alpha, candidate, 2);
+      long off_face = 0, projected = 0;
+      for (int y = 0; y < H; ++y) {
+        for (int x = 0; x < W; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * W + x;
+          const int f = faces.labels()[i];
+          float v[3] = {n.plane(0)[i], n.plane(1)[i], n.plane(2)[i]};
+          if (f >= 0) {
+            const double* d = &direction[3 * static_cast<std::size_t>(f)];
+            const double dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2];
+            double u[3];
+            for (int k = 0; k < 3; ++k)
+              u[k] = v[k] + alpha * (d[k] - dot * v[k]);
+            const double len =
+                std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+            for (int k = 0; k < 3; ++k) v[k] = static_cast<float>(u[k] / len);
+            float r[3];
+            t.level.ray(x, y, r);
+            if (r[0] * v[0] + r[1] * v[1] + r[2] * v[2] > 0.0f) {
+              projected += soft ? 1 : 0;
+              if (soft) internal::projectVisible(r, v);
+            }
+          } else {
+            ++off_face;
+          }
+          for (int k = 0; k < 3; ++k) {
+            ASSERT_NEAR(candidate.plane(k)[i], v[k], 2e-5f)
+                << "soft " << soft << ", alpha " << alpha << ", pixel (" << x
+                << ", " << y << "), face " << f << ", component " << k;
+          }
+        }
+      }
+      EXPECT_GE(off_face, 5 * H);
+      if (soft && alpha == 1.0) {
+        EXPECT_GT(projected, W * H / 10);
+      }
+    }
+  }
+}
+
 /// links between the faces.
 TEST(FaceCorrection, ModelIsTheDerivativesOfEAlongATurn) {
   const int W = 48, H = 36;

@@ -67,6 +67,13 @@ class FaceCorrection {
   /// common turn leaves almost unchanged, are left out).
   void buildModel(const PreparedLevel& level, double huber_eps,
                   DataPenalty penalty, const PlanarImage& n0, int threads);
+  /// candidate = n0 + alpha u, u = (I - n0 n0^T) D_f on face f (the
+  /// labels of begin(); `direction` holds D_f's x, y, z per face),
+  /// normalized and in soft mode projected onto the visible set as
+  /// projectVisible() does; n0 off the faces.
+  void candidateAt(const PreparedLevel& level, bool soft_visibility,
+                   const PlanarImage& n0, const std::vector<double>& direction,
+                   double alpha, PlanarImage& candidate, int threads);
   const std::vector<double>& modelGradient() const { return gradient_; }
   const std::vector<double>& modelHessian() const { return hessian_; }
   const std::vector<int>& labels() const { return label_; }
@@ -88,16 +95,12 @@ class FaceCorrection {
   /// direction_ = -(M + damping diag)^-1 G (Cholesky); false when not
   /// positive definite.
   bool solveDamped(double damping);
-  /// candidate = n0 + alpha u, u = (I - n0 n0^T) D_f on face f, normalized
-  /// (and projected onto the visible set in soft mode).
-  void candidateAt(const PreparedLevel& level, bool soft_visibility,
-                   const PlanarImage& n0, double alpha, PlanarImage& candidate,
-                   int threads) const;
 
   std::vector<int> label_, parent_, face_size_, face_order_;
   std::vector<double> gradient_, direction_, hessian_, factor_;
-  std::vector<double> thread_sums_;  ///< per-thread sums of buildModel()
-  std::vector<float> row_scratch_;   ///< per-thread rows of buildModel()
+  std::vector<float> directions_float_;  ///< direction_ in float
+  std::vector<double> thread_sums_;      ///< per-thread sums of buildModel()
+  std::vector<float> row_scratch_;       ///< per-thread rows of buildModel()
   PlanarImage trial_;
   int faces_ = 0;
   double energy_ = 0.0, damping_ = kInitialDamping;
