@@ -300,13 +300,20 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
       if (k == 0) shrink(face_step_seconds_, face_step_fastest_);
       break;
     }
-    if (faces_.step(level, terms.huber_eps, terms.penalty,
-                    settings_.visibility == VisibilityMode::kSoft, energy_of,
-                    state_.n0, threads_)) {
-      report.face_steps_accepted += 1;
-    }
+    const bool kept = faces_.step(level, terms.huber_eps, terms.penalty,
+                                  settings_.visibility == VisibilityMode::kSoft,
+                                  energy_of, state_.n0, threads_);
+    report.face_steps_accepted += kept ? 1 : 0;
     report.face_steps += 1;
-    timed(secondsSince(step_start), face_step_seconds_, face_step_fastest_);
+    // Only a kept step ran the whole line search: the others (no descent
+    // direction after the model, or E not lowered) may have ended early, and
+    // would set the floor below a whole step's time.
+    const double step_seconds = secondsSince(step_start);
+    if (kept) {
+      timed(step_seconds, face_step_seconds_, face_step_fastest_);
+    } else {
+      face_step_seconds_ = std::max(step_seconds, face_step_fastest_);
+    }
   }
   report.face_energy_decrease =
       report.corrected_faces > 0 ? face_energy - faces_.energy() : 0.0;
