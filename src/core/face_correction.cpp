@@ -533,20 +533,7 @@ NF_MULTIVERSION void rotateRow(const float* __restrict m0,
       const float r0 = k0 * xf + base[0];
       const float r1 = k1 * xf + base[1];
       const float r2 = k2 * xf + base[2];
-      const float rn = r0 * v0 + r1 * v1 + r2 * v2;
-      const float rr = r0 * r0 + r1 * r1 + r2 * r2;
-      const float p0 = v0 * rr - r0 * rn, p1 = v1 * rr - r1 * rn,
-                  p2 = v2 * rr - r2 * rn;
-      const float len = std::sqrt(p0 * p0 + p1 * p1 + p2 * p2);
-      // Facing the camera: unchanged; else the nearest visible normal, or
-      // -r / |r| where the projection vanishes.
-      const bool degenerate = len <= 1e-6f * rr;
-      const float scale = degenerate ? 0.0f : 1.0f / std::max(len, 1e-30f);
-      const float back = degenerate ? -1.0f / std::sqrt(rr) : 0.0f;
-      const bool away = rn > 0.0f;
-      v0 = away ? p0 * scale + r0 * back : v0;
-      v1 = away ? p1 * scale + r1 * back : v1;
-      v2 = away ? p2 * scale + r2 * back : v2;
+      projectVisibleSelect(r0, r1, r2, v0, v1, v2);
     }
     const bool on_face = f >= 0;
     o0[x] = on_face ? v0 : u0;

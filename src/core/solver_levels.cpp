@@ -312,26 +312,9 @@ NF_MULTIVERSION void sanitizeWarmRow(int W, float y, const float* Ki,
     const float inv = 1.0f / std::sqrt(usable ? len2 : 1.0f);
     float v0 = nx[x] * inv, v1 = ny[x] * inv, v2 = nz[x] * inv;
     if (kSoft) {
-      // projectVisible(): facing away (r . v > 0) -> onto the plane normal
-      // to r, or -r / |r| when v is (nearly) r itself.
       const float fx = static_cast<float>(x);
-      const float r0 = Ki[0] * fx + ry0, r1 = Ki[3] * fx + ry1,
-                  r2 = Ki[6] * fx + ry2;
-      const float rn = r0 * v0 + r1 * v1 + r2 * v2;
-      const float rr = r0 * r0 + r1 * r1 + r2 * r2;
-      const float m0 = v0 * rr - r0 * rn, m1 = v1 * rr - r1 * rn,
-                  m2 = v2 * rr - r2 * rn;
-      const float m_len = std::sqrt(m0 * m0 + m1 * m1 + m2 * m2);
-      const bool away = rn > 0.0f;
-      const bool degenerate = m_len <= 1e-6f * rr;
-      const float inv_m = 1.0f / (degenerate ? 1.0f : m_len);
-      const float inv_r = 1.0f / std::sqrt(rr);
-      const float p0 = degenerate ? -r0 * inv_r : m0 * inv_m;
-      const float p1 = degenerate ? -r1 * inv_r : m1 * inv_m;
-      const float p2 = degenerate ? -r2 * inv_r : m2 * inv_m;
-      v0 = away ? p0 : v0;
-      v1 = away ? p1 : v1;
-      v2 = away ? p2 : v2;
+      projectVisibleSelect(Ki[0] * fx + ry0, Ki[3] * fx + ry1, Ki[6] * fx + ry2,
+                           v0, v1, v2);
     }
     nx[x] = usable ? v0 : nx[x];
     ny[x] = usable ? v1 : ny[x];

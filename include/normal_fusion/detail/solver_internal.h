@@ -427,6 +427,29 @@ inline void projectVisible(const float r[3], float n[3]) {
   n[2] = m[2] / len;
 }
 
+/// projectVisible() without branches, for vectorized row kernels: the
+/// unit normal v and the pixel's ray r in registers, v replaced when it
+/// faces away (r . v > 0).
+inline void projectVisibleSelect(float r0, float r1, float r2, float& v0,
+                                 float& v1, float& v2) {
+  const float rn = r0 * v0 + r1 * v1 + r2 * v2;
+  const float rr = r0 * r0 + r1 * r1 + r2 * r2;
+  const float m0 = v0 * rr - r0 * rn, m1 = v1 * rr - r1 * rn,
+              m2 = v2 * rr - r2 * rn;
+  const float m_len = std::sqrt(m0 * m0 + m1 * m1 + m2 * m2);
+  const bool away = rn > 0.0f;
+  // Onto the plane normal to r, or -r / |r| when v is (nearly) r itself.
+  const bool degenerate = m_len <= 1e-6f * rr;
+  const float inv_m = 1.0f / (degenerate ? 1.0f : m_len);
+  const float inv_r = 1.0f / std::sqrt(rr);
+  const float p0 = degenerate ? -r0 * inv_r : m0 * inv_m;
+  const float p1 = degenerate ? -r1 * inv_r : m1 * inv_m;
+  const float p2 = degenerate ? -r2 * inv_r : m2 * inv_m;
+  v0 = away ? p0 : v0;
+  v1 = away ? p1 : v1;
+  v2 = away ? p2 : v2;
+}
+
 namespace reference {
 /// The single steps of the reference iteration (exposed for the unit tests).
 void gradient(const PlanarImage& n, PlanarImage& grad_h, PlanarImage& grad_v);
