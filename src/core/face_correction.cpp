@@ -95,62 +95,161 @@ void tangentEnergyGradient(const PreparedLevel& level, double huber_eps,
   }
 }
 
+void FaceLabelScratch::reserve(std::size_t pixels, int height) {
+  run_start.reserve(pixels);
+  run_parent.reserve(pixels);
+  row_runs.reserve(static_cast<std::size_t>(height));
+  right.reserve(pixels);
+  down.reserve(pixels);
+}
+
+void FaceLabelScratch::fit(std::size_t pixels, int height) {
+  releaseIfOversized(run_start, pixels);
+  releaseIfOversized(run_parent, pixels);
+  releaseIfOversized(row_runs, static_cast<std::size_t>(height));
+  releaseIfOversized(right, pixels);
+  releaseIfOversized(down, pixels);
+}
+
+std::size_t FaceLabelScratch::bytesHeld() const {
+  return internal::bytesHeld(run_start) + internal::bytesHeld(run_parent) +
+         internal::bytesHeld(row_runs) + internal::bytesHeld(right) +
+         internal::bytesHeld(down);
+}
+
+namespace {
+
+/// Whether each pixel of a row is close to its right neighbour and to the
+/// one below (cos of the angle >= cos_limit; the last column and, without
+/// a row below, every pixel: not). Branch-free (vectorized).
+NF_MULTIVERSION void closeNeighboursRow(const float* __restrict n0,
+                                        const float* __restrict n1,
+                                        const float* __restrict n2, int W,
+                                        bool has_below, float cos_limit,
+                                        unsigned char* __restrict right,
+                                        unsigned char* __restrict down) {
+  for (int x = 0; x + 1 < W; ++x) {
+    right[x] =
+        n0[x] * n0[x + 1] + n1[x] * n1[x + 1] + n2[x] * n2[x + 1] >= cos_limit
+            ? 1
+            : 0;
+  }
+  right[W - 1] = 0;
+  if (!has_below) {
+    std::fill(down, down + W, static_cast<unsigned char>(0));
+    return;
+  }
+  for (int x = 0; x < W; ++x) {
+    down[x] =
+        n0[x] * n0[x + W] + n1[x] * n1[x + W] + n2[x] * n2[x + W] >= cos_limit
+            ? 1
+            : 0;
+  }
+}
+
+}  // namespace
+
 int labelFaces(const PlanarImage& normals, double degrees,
-               std::vector<int>& label, std::vector<int>& parent, int threads) {
+               std::vector<int>& label, FaceLabelScratch& scratch,
+               int threads) {
   const int W = normals.width(), H = normals.height();
   const std::size_t N = normals.pixelCount();
-  parent.resize(N);
   label.resize(N);
+  scratch.run_start.resize(N);
+  scratch.run_parent.resize(N);
+  scratch.row_runs.resize(static_cast<std::size_t>(H));
+  scratch.right.resize(N);
+  scratch.down.resize(N);
+  if (N == 0) return 0;
   const float cos_limit =
       static_cast<float>(std::cos(degrees * 3.14159265358979 / 180.0));
-  const float* n[3] = {normals.plane(0), normals.plane(1), normals.plane(2)};
-  auto close = [&](std::size_t a, std::size_t b) {
-    return n[0][a] * n[0][b] + n[1][a] * n[1][b] + n[2][a] * n[2][b] >=
-           cos_limit;
-  };
-  // Rows in parallel: each run of close pixels along a row is one tree
-  // (parent: the run's first pixel); label holds whether a pixel is close
-  // to the one below.
+  int* run_start = scratch.run_start.data();
+  int* parent = scratch.run_parent.data();
+  int* row_runs = scratch.row_runs.data();
+  const unsigned char* down = scratch.down.data();
+  // Rows in parallel: the neighbour tests, then the row's runs (a new run
+  // where a pixel is not close to its left neighbour), each its own tree.
 #pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
   for (int y = 0; y < H; ++y) {
     const std::size_t row = static_cast<std::size_t>(y) * W;
-    int start = static_cast<int>(row);
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = row + x;
-      if (x > 0 && !close(i - 1, i)) start = static_cast<int>(i);
-      parent[i] = start;
-      label[i] = y + 1 < H && close(i, i + W) ? 1 : 0;
+    unsigned char* right = scratch.right.data() + row;
+    closeNeighboursRow(normals.plane(0) + row, normals.plane(1) + row,
+                       normals.plane(2) + row, W, y + 1 < H, cos_limit, right,
+                       scratch.down.data() + row);
+    int runs = 0;
+    run_start[row] = 0;
+    parent[row] = static_cast<int>(row);
+    for (int x = 1; x < W; ++x) {
+      if (right[x - 1] != 0) continue;
+      ++runs;
+      run_start[row + runs] = x;
+      parent[row + runs] = static_cast<int>(row) + runs;
     }
+    row_runs[y] = runs + 1;
   }
-  // Then the runs joined down the image, once per pair of runs that touch.
+  // The runs of each pair of rows joined where they overlap and some pixel
+  // of the overlap is close to the one below (serial: one sweep per pair).
   for (int y = 0; y + 1 < H; ++y) {
-    const std::size_t row = static_cast<std::size_t>(y) * W;
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = row + x;
-      if (label[i] == 0) continue;
-      if (x > 0 && label[i - 1] != 0 && parent[i] == parent[i - 1] &&
-          parent[i + W] == parent[i + W - 1]) {
-        continue;  // the same two runs as the pixel before
+    const int a_base = y * W, b_base = a_base + W;
+    const int a_count = row_runs[y], b_count = row_runs[y + 1];
+    int i = 0, j = 0;
+    while (i < a_count && j < b_count) {
+      const int a_end = i + 1 < a_count ? run_start[a_base + i + 1] : W;
+      const int b_end = j + 1 < b_count ? run_start[b_base + j + 1] : W;
+      const int lo = std::max(run_start[a_base + i], run_start[b_base + j]);
+      const int hi = std::min(a_end, b_end);
+      if (lo < hi) {
+        const unsigned char* d = down + a_base;
+        if (std::find(d + lo, d + hi, static_cast<unsigned char>(1)) !=
+            d + hi) {
+          unite(scratch.run_parent, a_base + i, b_base + j);
+        }
       }
-      unite(parent, static_cast<int>(i), static_cast<int>(i + W));
+      if (a_end <= b_end) ++i;
+      if (b_end <= a_end) ++j;
     }
   }
-  // Every parent precedes its child (a run's first pixel, the smaller root
+  // Every parent precedes its child (a run's own slot, or the smaller root
   // of a union), so in raster order the parent's root is already final.
-  // Sizes at the roots (label as a counter first), then the faces' labels.
-  std::fill(label.begin(), label.end(), 0);
-  for (std::size_t i = 0; i < N; ++i) {
-    parent[i] = parent[static_cast<std::size_t>(parent[i])];
-    label[static_cast<std::size_t>(parent[i])] += 1;
+  // Sizes at the roots (label as a counter per run slot), then each root's
+  // face (or -1), then each run's.
+  for (int y = 0; y < H; ++y) {
+    const int base = y * W;
+    for (int k = 0; k < row_runs[y]; ++k) {
+      const int r = base + k;
+      parent[r] = parent[parent[r]];
+      const int end = k + 1 < row_runs[y] ? run_start[r + 1] : W;
+      label[static_cast<std::size_t>(r)] = 0;
+      label[static_cast<std::size_t>(parent[r])] += end - run_start[r];
+    }
   }
   int faces = 0;
-  for (std::size_t i = 0; i < N; ++i) {
-    if (parent[i] != static_cast<int>(i)) continue;
-    // A root's entry becomes its face's label (or -1).
-    label[i] = label[i] >= kMinFacePixels ? faces++ : -1;
+  for (int y = 0; y < H; ++y) {
+    const int base = y * W;
+    for (int k = 0; k < row_runs[y]; ++k) {
+      const int r = base + k;
+      if (parent[r] != r) continue;
+      // A root's slot becomes its face's label (or -1).
+      label[static_cast<std::size_t>(r)] =
+          label[static_cast<std::size_t>(r)] >= kMinFacePixels ? faces++ : -1;
+    }
   }
-  for (std::size_t i = 0; i < N; ++i) {
-    if (parent[i] != static_cast<int>(i)) label[i] = label[parent[i]];
+  for (int y = 0; y < H; ++y) {
+    const int base = y * W;
+    for (int k = 0; k < row_runs[y]; ++k) {
+      parent[base + k] = label[static_cast<std::size_t>(parent[base + k])];
+    }
+  }
+  // The pixels' labels, run by run (a row writes only its own pixels, and
+  // reads only its own runs).
+#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
+  for (int y = 0; y < H; ++y) {
+    const int base = y * W;
+    for (int k = 0; k < row_runs[y]; ++k) {
+      const int end = k + 1 < row_runs[y] ? run_start[base + k + 1] : W;
+      std::fill(label.begin() + base + run_start[base + k],
+                label.begin() + base + end, parent[base + k]);
+    }
   }
   return faces;
 }
@@ -158,7 +257,7 @@ int labelFaces(const PlanarImage& normals, double degrees,
 void FaceCorrection::reserve(int width, int height, int threads) {
   const std::size_t N = static_cast<std::size_t>(width) * height;
   label_.reserve(N);
-  parent_.reserve(N);
+  label_scratch_.reserve(N, height);
   const std::size_t all_faces = N / kMinFacePixels + 1;
   face_size_.reserve(all_faces);
   face_order_.reserve(all_faces);
@@ -178,7 +277,7 @@ void FaceCorrection::reserve(int width, int height, int threads) {
 void FaceCorrection::fit(int width, int height) {
   const std::size_t N = static_cast<std::size_t>(width) * height;
   releaseIfOversized(label_, N);
-  releaseIfOversized(parent_, N);
+  label_scratch_.fit(N, height);
   releaseIfOversized(face_size_, N / kMinFacePixels + 1);
   releaseIfOversized(face_order_, N / kMinFacePixels + 1);
   releaseIfOversized(row_scratch_, 6 * static_cast<std::size_t>(width) * 64);
@@ -191,7 +290,7 @@ std::size_t FaceCorrection::modelDoubles(int faces) {
 }
 
 std::size_t FaceCorrection::bytesHeld() const {
-  return internal::bytesHeld(label_) + internal::bytesHeld(parent_) +
+  return internal::bytesHeld(label_) + label_scratch_.bytesHeld() +
          internal::bytesHeld(face_size_) + internal::bytesHeld(face_order_) +
          internal::bytesHeld(gradient_) + internal::bytesHeld(direction_) +
          internal::bytesHeld(directions_float_) +
@@ -202,7 +301,7 @@ std::size_t FaceCorrection::bytesHeld() const {
 
 int FaceCorrection::begin(const PlanarImage& n0, double degrees,
                           const EnergyFunction& energy_of, int threads) {
-  faces_ = labelFaces(n0, degrees, label_, parent_, threads);
+  faces_ = labelFaces(n0, degrees, label_, label_scratch_, threads);
   if (faces_ > kMaxFaces) keepLargestFaces();
   damping_ = kInitialDamping;
   energy_ = faces_ > 0 ? energy_of(n0) : 0.0;

@@ -113,8 +113,9 @@ TEST(FaceCorrection, LabelsFacesAndLeavesSmallRegionsOut) {
       for (int k = 0; k < 3; ++k) n.at(k, y, x) = v[k];
     }
   }
-  std::vector<int> label, parent;
-  ASSERT_EQ(internal::labelFaces(n, 2.0, label, parent), 2);
+  std::vector<int> label;
+  internal::FaceLabelScratch scratch;
+  ASSERT_EQ(internal::labelFaces(n, 2.0, label, scratch), 2);
   const int left = label[0], right = label[W - 1];
   EXPECT_NE(left, right);
   EXPECT_GE(left, 0);
@@ -127,7 +128,7 @@ TEST(FaceCorrection, LabelsFacesAndLeavesSmallRegionsOut) {
     }
   }
   // At 12 degrees the two halves are one face.
-  EXPECT_EQ(internal::labelFaces(n, 12.0, label, parent), 1);
+  EXPECT_EQ(internal::labelFaces(n, 12.0, label, scratch), 1);
 }
 
 /// Faces by flood fill in raster order: the oracle of labelFaces().
@@ -196,8 +197,9 @@ TEST(FaceCorrection, LabelsAsAFloodFillOnAnyThreadCount) {
     ASSERT_GE(expected_faces, 2) << degrees;
     ASSERT_GT(left_out, 0) << degrees;
     for (int threads : {1, 2, 3}) {
-      std::vector<int> label, parent;
-      EXPECT_EQ(internal::labelFaces(n, degrees, label, parent, threads),
+      std::vector<int> label;
+      internal::FaceLabelScratch scratch;
+      EXPECT_EQ(internal::labelFaces(n, degrees, label, scratch, threads),
                 expected_faces)
           << degrees << " degrees, " << threads << " threads";
       EXPECT_EQ(label, expected)
@@ -223,8 +225,9 @@ TEST(FaceCorrection, KeepsTheLargestFaces) {
       for (int k = 0; k < 3; ++k) n.at(k, y, x) = v[k];
     }
   }
-  std::vector<int> label, parent;
-  const int all = internal::labelFaces(n, 2.0, label, parent, 2);
+  std::vector<int> label;
+  internal::FaceLabelScratch scratch;
+  const int all = internal::labelFaces(n, 2.0, label, scratch, 2);
   ASSERT_GT(all, internal::kMaxFaces);
   internal::FaceCorrection faces;
   faces.reserve(W, H, 2);

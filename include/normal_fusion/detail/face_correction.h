@@ -26,12 +26,29 @@ void tangentEnergyGradient(const PreparedLevel& level, double huber_eps,
                            DataPenalty penalty, const PlanarImage& normals,
                            PlanarImage& gradient, int threads);
 
+/// labelFaces()' buffers: the runs of each row (a run: pixels joined to
+/// their left neighbour), their trees, and the neighbour tests.
+struct FaceLabelScratch {
+  /// Run k of row y is entry y W + k: its first pixel, its tree's parent
+  /// (then its face).
+  std::vector<int> run_start, run_parent;
+  std::vector<int> row_runs;  ///< runs per row
+  /// Per pixel: close to the pixel on the right / below.
+  std::vector<unsigned char> right, down;
+
+  void reserve(std::size_t pixels, int height);
+  void fit(std::size_t pixels, int height);
+  std::size_t bytesHeld() const;
+};
+
 /// The faces of a map: 4-connected components of pixels whose neighbours'
 /// normals lie within `degrees` of each other; a face of fewer than
 /// kMinFacePixels pixels gets -1. Returns the number of faces (labels 0 ..
-/// count - 1). `parent` is scratch; rows are scanned on `threads` threads.
+/// count - 1, in the raster order of each face's first pixel). The
+/// components are joined run by run (serial work in proportion to the runs,
+/// not the pixels); rows are scanned and written on `threads` threads.
 int labelFaces(const PlanarImage& normals, double degrees,
-               std::vector<int>& label, std::vector<int>& parent,
+               std::vector<int>& label, FaceLabelScratch& scratch,
                int threads = 1);
 
 /// At most this many faces (the largest) are corrected: their Newton
@@ -96,7 +113,8 @@ class FaceCorrection {
   /// positive definite.
   bool solveDamped(double damping);
 
-  std::vector<int> label_, parent_, face_size_, face_order_;
+  std::vector<int> label_, face_size_, face_order_;
+  FaceLabelScratch label_scratch_;
   std::vector<double> gradient_, direction_, hessian_, factor_;
   std::vector<float> directions_float_;  ///< direction_ in float
   std::vector<double> thread_sums_;      ///< per-thread sums of buildModel()
