@@ -409,6 +409,42 @@ NF_MULTIVERSION void linkModelRow(
   }
 }
 
+/// One run of `count` pixels of one face: sum[0..2] += the tangent
+/// gradients (I - u u^T) grad, sum[3..8] += the packed blocks s (I - u u^T)
+/// with s = a - m . grad. The sums in float, vectorized (their order within
+/// the run is the compiler's).
+NF_MULTIVERSION void faceRunSums(
+    const float* __restrict u0, const float* __restrict u1,
+    const float* __restrict u2, const float* __restrict g0,
+    const float* __restrict g1, const float* __restrict g2,
+    const float* __restrict m_grad, const float* __restrict a, int count,
+    float sum[9]) {
+  float s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0, s5 = 0, s6 = 0, s7 = 0, s8 = 0;
+#pragma omp simd reduction(+ : s0, s1, s2, s3, s4, s5, s6, s7, s8)
+  for (int x = 0; x < count; ++x) {
+    const float ug = u0[x] * g0[x] + u1[x] * g1[x] + u2[x] * g2[x];
+    const float sc = a[x] - m_grad[x];
+    s0 += g0[x] - ug * u0[x];
+    s1 += g1[x] - ug * u1[x];
+    s2 += g2[x] - ug * u2[x];
+    s3 += sc * (1.0f - u0[x] * u0[x]);
+    s4 -= sc * u0[x] * u1[x];
+    s5 -= sc * u0[x] * u2[x];
+    s6 += sc * (1.0f - u1[x] * u1[x]);
+    s7 -= sc * u1[x] * u2[x];
+    s8 += sc * (1.0f - u2[x] * u2[x]);
+  }
+  sum[0] = s0;
+  sum[1] = s1;
+  sum[2] = s2;
+  sum[3] = s3;
+  sum[4] = s4;
+  sum[5] = s5;
+  sum[6] = s6;
+  sum[7] = s7;
+  sum[8] = s8;
+}
+
 }  // namespace
 
 void FaceCorrection::buildModel(const PreparedLevel& level, double huber_eps,
@@ -496,25 +532,12 @@ void FaceCorrection::buildModel(const PreparedLevel& level, double huber_eps,
       // run, in double across runs): G_f += g, block_f += s (I - m m^T).
       for (int x = 0; x < W;) {
         const int f = lab[x];
-        float sum[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-        int end = x;
-        for (; end < W && lab[end] == f; ++end) {
-          const float u[3] = {m[0][end], m[1][end], m[2][end]};
-          // g = (I - u u^T) grad; the block's scale a - m . grad.
-          const float ug =
-              u[0] * g[0][end] + u[1] * g[1][end] + u[2] * g[2][end];
-          const float sc = a[end] - m_grad[end];
-          sum[0] += g[0][end] - ug * u[0];
-          sum[1] += g[1][end] - ug * u[1];
-          sum[2] += g[2][end] - ug * u[2];
-          sum[3] += sc * (1.0f - u[0] * u[0]);
-          sum[4] -= sc * u[0] * u[1];
-          sum[5] -= sc * u[0] * u[2];
-          sum[6] += sc * (1.0f - u[1] * u[1]);
-          sum[7] -= sc * u[1] * u[2];
-          sum[8] += sc * (1.0f - u[2] * u[2]);
-        }
+        int end = x + 1;
+        while (end < W && lab[end] == f) ++end;
         if (f >= 0) {
+          float sum[9];
+          faceRunSums(m[0] + x, m[1] + x, m[2] + x, g[0] + x, g[1] + x,
+                      g[2] + x, m_grad + x, a + x, end - x, sum);
           for (int k = 0; k < 3; ++k) G[3 * f + k] += sum[k];
           for (int k = 0; k < 6; ++k) B[6 * f + k] += sum[3 + k];
         }
