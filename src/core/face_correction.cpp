@@ -409,10 +409,10 @@ NF_MULTIVERSION void linkModelRow(
   }
 }
 
-/// One run of `count` pixels of one face: sum[0..2] += the tangent
-/// gradients (I - u u^T) grad, sum[3..8] += the packed blocks s (I - u u^T)
-/// with s = a - m . grad. The sums in float, vectorized (their order within
-/// the run is the compiler's).
+/// One run of `count` pixels of one face: sum[0..2] = the sum of the
+/// tangent gradients (I - u u^T) grad, sum[3..8] = the sum of the packed
+/// blocks s (I - u u^T) with s = a - m . grad. In float, vectorized (the
+/// order of the additions within the run is the compiler's).
 NF_MULTIVERSION void faceRunSums(
     const float* __restrict u0, const float* __restrict u1,
     const float* __restrict u2, const float* __restrict g0,
