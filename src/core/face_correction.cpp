@@ -167,6 +167,10 @@ int labelFaces(const PlanarImage& normals, double degrees,
   int* parent = scratch.run_parent.data();
   int* row_runs = scratch.row_runs.data();
   const unsigned char* down = scratch.down.data();
+  // The end of run k of row y (the next run's start, or the row's end).
+  auto runEnd = [&](int y, int k) {
+    return k + 1 < row_runs[y] ? run_start[y * W + k + 1] : W;
+  };
   // Rows in parallel: the neighbour tests, then the row's runs (a new run
   // where a pixel is not close to its left neighbour), each its own tree.
 #pragma omp parallel for num_threads(std::max(1, threads)) schedule(static)
@@ -194,8 +198,7 @@ int labelFaces(const PlanarImage& normals, double degrees,
     const int a_count = row_runs[y], b_count = row_runs[y + 1];
     int i = 0, j = 0;
     while (i < a_count && j < b_count) {
-      const int a_end = i + 1 < a_count ? run_start[a_base + i + 1] : W;
-      const int b_end = j + 1 < b_count ? run_start[b_base + j + 1] : W;
+      const int a_end = runEnd(y, i), b_end = runEnd(y + 1, j);
       const int lo = std::max(run_start[a_base + i], run_start[b_base + j]);
       const int hi = std::min(a_end, b_end);
       if (lo < hi) {
@@ -218,9 +221,8 @@ int labelFaces(const PlanarImage& normals, double degrees,
     for (int k = 0; k < row_runs[y]; ++k) {
       const int r = base + k;
       parent[r] = parent[parent[r]];
-      const int end = k + 1 < row_runs[y] ? run_start[r + 1] : W;
       label[static_cast<std::size_t>(r)] = 0;
-      label[static_cast<std::size_t>(parent[r])] += end - run_start[r];
+      label[static_cast<std::size_t>(parent[r])] += runEnd(y, k) - run_start[r];
     }
   }
   int faces = 0;
@@ -246,9 +248,8 @@ int labelFaces(const PlanarImage& normals, double degrees,
   for (int y = 0; y < H; ++y) {
     const int base = y * W;
     for (int k = 0; k < row_runs[y]; ++k) {
-      const int end = k + 1 < row_runs[y] ? run_start[base + k + 1] : W;
       std::fill(label.begin() + base + run_start[base + k],
-                label.begin() + base + end, parent[base + k]);
+                label.begin() + base + runEnd(y, k), parent[base + k]);
     }
   }
   return faces;
