@@ -2,8 +2,8 @@
 # Sets up, builds and runs every test of normal_fusion (unit tests and rostests),
 # then the platform checks: no compiler warning in the package's sources,
 # every installed header compiled as a downstream C++14 package would
-# (scripts/check_headers.sh), catkin_lint, and the package built with g++-11,
-# clang++-14 and without OpenCV contrib, with unit tests
+# (scripts/check_headers.sh), catkin_lint, and the package built with g++-11
+# without OpenCV contrib and with clang++-14, the latter's unit tests run
 # (scripts/check_builds.sh). Exits non-zero when any test or check fails.
 # Arguments go to ctest; NF_EXTRA_BUILDS=0 leaves out the other builds.
 set -euo pipefail
