@@ -48,7 +48,11 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
 
   // Cancelled before the levels start (a request made before the call, or
   // while the inputs are prepared): `out` is unchanged.
-  if (cancelled() || !prepare(problem, report)) {
+  // A warm frame may use the inputs' noise gains of the frames before it.
+  const bool may_warm =
+      warm && out.compatible(problem.image.width(), problem.image.height(),
+                             static_cast<int>(problem.inputs.size()));
+  if (cancelled() || !prepare(problem, may_warm, report)) {
     finishCancelledBeforeStart(report, start);
     return;
   }
@@ -164,10 +168,12 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
   finishReport(report, start);
 }
 
-bool SolverImpl::prepare(const FusionProblem& problem, SolveReport& report) {
+bool SolverImpl::prepare(const FusionProblem& problem, bool warm,
+                         SolveReport& report) {
   if (levels_.empty()) levels_.resize(1);
   if (!internal::prepareFinestInto(problem, settings_, levels_[0],
-                                   edge_scratch_, threads_, &cancel_request_)) {
+                                   edge_scratch_, threads_, &cancel_request_,
+                                   &noise_gains_, warm)) {
     cancelled_ = true;
     return false;
   }
@@ -349,6 +355,8 @@ Solver& Solver::operator=(Solver&&) noexcept = default;
 void Solver::setSettings(const SolverSettings& settings) {
   settings.validate();
   impl_->settings_ = settings;
+  // Gains estimated under other settings (radii, model) are not these'.
+  impl_->noise_gains_.clear();
 }
 
 const SolverSettings& Solver::settings() const { return impl_->settings_; }

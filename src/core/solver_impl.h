@@ -57,6 +57,9 @@ class SolverImpl {
   }
 
   SolverSettings settings_;
+  /// The inputs' noise gains kept for the warm frames (cleared with new
+  /// settings).
+  internal::NoiseGainMemory noise_gains_;
 
   /// Solves into `report` (its vectors keep their capacity: no allocation in
   /// steady state when the caller reuses it).
@@ -94,7 +97,8 @@ class SolverImpl {
   // solver.cpp: the solve.
 
   /// Prepares the finest level and checks it; false when cancelled meanwhile.
-  bool prepare(const FusionProblem& problem, SolveReport& report);
+  /// `warm`: a warm frame, which may use the kept noise gains.
+  bool prepare(const FusionProblem& problem, bool warm, SolveReport& report);
   /// The coarser levels of a cold start (automatic: always when `budgeted`);
   /// returns how many levels there are.
   int buildPyramid(bool budgeted);

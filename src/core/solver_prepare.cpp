@@ -167,13 +167,10 @@ long countValidPixels(const PreparedLevel& level, int threads) {
 /// threshold reads the noise a wide window sees where the local one misses
 /// what neighbours share, and c *= g^-noise_weight_power, since such an
 /// input's neighbouring pixels repeat one error rather than average it.
-void applyNoiseGain(const SolverSettings& settings, const PlanarImage& data,
-                    PlanarImage& data_eps, PlanarImage& data_weight,
-                    PlanarImage* mean_spread, int threads) {
-  const float gain =
-      estimateNoise(data, settings.local_radius, settings.noise_radius, threads,
-                    settings.noise_plane_residual)
-          .gain;
+void applyNoiseGain(const SolverSettings& settings, float gain,
+                    const PlanarImage& data, PlanarImage& data_eps,
+                    PlanarImage& data_weight, PlanarImage* mean_spread,
+                    int threads) {
   SolverSettings scaled = settings;
   scaled.data_eps_local *= gain;
   applyLocalStatistics(scaled, data, data_eps, data_weight, mean_spread,
@@ -193,7 +190,8 @@ void applyNoiseGain(const SolverSettings& settings, const PlanarImage& data,
 bool prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads,
-                       const std::atomic<bool>* cancel) {
+                       const std::atomic<bool>* cancel,
+                       NoiseGainMemory* noise_gains, bool reuse_noise_gains) {
   validateProblem(problem);
   const int W = problem.image.width(), H = problem.image.height();
   level.width = W;
@@ -229,12 +227,33 @@ bool prepareFinestInto(const FusionProblem& problem,
   level.data_eps.resize(level.num_inputs);
   const bool means = settings.warm_refine_iterations > 0;
   level.data_mean.resize(means ? level.num_inputs : 0);
+  const bool estimates = settings.noise_radius > settings.local_radius;
+  // The kept gains stand for this frame's when they are the same inputs'
+  // (a warm frame) and recent enough.
+  const bool reuse =
+      estimates && noise_gains != nullptr && reuse_noise_gains &&
+      noise_gains->gains.size() == static_cast<std::size_t>(level.num_inputs) &&
+      noise_gains->uses < NoiseGainMemory::kFrames;
+  if (noise_gains != nullptr) {
+    if (reuse) {
+      ++noise_gains->uses;
+    } else {
+      noise_gains->clear();
+    }
+  }
   for (int l = 0; l < level.num_inputs; ++l) {
     if (stopRequested(cancel)) return false;
     level.data_eps[l].resize(W, H, 1);
     if (means) level.data_mean[l].resize(W, H, 4);
-    if (settings.noise_radius > settings.local_radius) {
-      applyNoiseGain(settings, level.data[l], level.data_eps[l],
+    if (estimates) {
+      const float gain =
+          reuse ? noise_gains->gains[l]
+                : estimateNoise(level.data[l], settings.local_radius,
+                                settings.noise_radius, threads,
+                                settings.noise_plane_residual)
+                      .gain;
+      if (noise_gains != nullptr && !reuse) noise_gains->gains.push_back(gain);
+      applyNoiseGain(settings, gain, level.data[l], level.data_eps[l],
                      level.data_weight[l],
                      means ? &level.data_mean[l] : nullptr, threads);
     } else {

@@ -121,6 +121,62 @@ TEST(NoiseEstimate, ThresholdAndWeightFollowTheGainOnlyWhenOn) {
   EXPECT_GT(white.data_weight[0].at(0, 30, 40), 0.5f / 1.1f);
 }
 
+/// A stream's warm frames use the gains estimated on an earlier frame for
+/// up to NoiseGainMemory::kFrames frames, then estimate them again; a cold
+/// frame always estimates them.
+TEST(NoiseEstimate, WarmFramesUseTheKeptGainsForAFewFrames) {
+  const int W = 80, H = 60;
+  NormalMap gt;
+  FusionProblem white = test::twoPlaneScene(W, H, &gt);
+  white.inputs.resize(1);
+  white.inputs[0].normals = noiseField(W, H, 1, 0.1, 6);
+  FusionProblem shared = white;
+  shared.inputs[0].normals = noiseField(W, H, 5, 0.1, 7);
+  SolverSettings settings;
+  settings.noise_radius = 8;
+  settings.noise_plane_residual = false;
+  const float white_gain =
+      internal::estimateNoise(white.inputs[0].normals, 1, 8, 1).gain;
+  const float shared_gain =
+      internal::estimateNoise(shared.inputs[0].normals, 1, 8, 1).gain;
+  ASSERT_GT(shared_gain, white_gain + 0.3f);
+  const internal::PreparedLevel shared_alone =
+      internal::prepareFinest(shared, settings);
+
+  internal::PreparedLevel level;
+  internal::EdgeWeightScratch scratch;
+  internal::NoiseGainMemory memory;
+  auto prepare = [&](const FusionProblem& problem, bool warm) {
+    ASSERT_TRUE(internal::prepareFinestInto(problem, settings, level, scratch,
+                                            1, nullptr, &memory, warm));
+  };
+  // A cold frame estimates and keeps the gain.
+  prepare(white, false);
+  ASSERT_EQ(memory.gains.size(), 1u);
+  EXPECT_NEAR(memory.gains[0], white_gain, 1e-5f);
+  // The warm frames after it use it: the shared noise's frame is prepared
+  // as white noise, unlike the same frame alone.
+  for (int frame = 0; frame < internal::NoiseGainMemory::kFrames; ++frame) {
+    prepare(shared, true);
+    EXPECT_NEAR(memory.gains[0], white_gain, 1e-5f) << "frame " << frame;
+    EXPECT_GT(level.data_weight[0].at(0, 30, 40),
+              1.2f * shared_alone.data_weight[0].at(0, 30, 40))
+        << "frame " << frame;
+  }
+  // Then it is estimated again, and the frame is prepared as it is alone.
+  prepare(shared, true);
+  EXPECT_NEAR(memory.gains[0], shared_gain, 1e-5f);
+  EXPECT_EQ(level.data_weight[0].at(0, 30, 40),
+            shared_alone.data_weight[0].at(0, 30, 40));
+  EXPECT_EQ(level.data_eps[0].at(0, 30, 40),
+            shared_alone.data_eps[0].at(0, 30, 40));
+  // A cold frame estimates at once.
+  prepare(white, true);
+  EXPECT_NEAR(memory.gains[0], shared_gain, 1e-5f);
+  prepare(white, false);
+  EXPECT_NEAR(memory.gains[0], white_gain, 1e-5f);
+}
+
 /// A cylinder of radius `radius` pixels with its axis along y (normals
 /// turning with x, facing -z at the centre column), tilted by white noise of
 /// RMS `sigma` per tangent axis.

@@ -501,13 +501,34 @@ void computeEdgeWeightsPassByPass(const ColorImage& image,
 /// terms' Huber thresholds and the edge weights (weakened inside holes).
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
+/// Each input's noise gain (estimateNoise()) kept across a stream's warm
+/// frames: the gain describes the producer of an input (how far its errors
+/// are shared between pixels), which does not change from one frame to the
+/// next, while its estimate costs about 1 ms per input at 640x480.
+struct NoiseGainMemory {
+  /// Frames a kept gain is used for before it is estimated again.
+  static constexpr int kFrames = 8;
+  std::vector<float> gains;  ///< per input (empty: none kept)
+  int uses = 0;              ///< frames the kept gains were used for
+
+  /// Forgets the gains (the next frame estimates them).
+  void clear() {
+    gains.clear();
+    uses = 0;
+  }
+};
+
 /// The same into reused buffers, with `threads` threads. Returns false when
 /// a set `cancel` (read between its steps) stopped it: the level is then
-/// incomplete (not to be solved on).
+/// incomplete (not to be solved on). With `noise_gains`, a warm frame
+/// (`reuse_noise_gains`) uses the kept gains for up to
+/// NoiseGainMemory::kFrames frames, and an estimated gain is kept.
 bool prepareFinestInto(const FusionProblem& problem,
                        const SolverSettings& settings, PreparedLevel& level,
                        EdgeWeightScratch& scratch, int threads,
-                       const std::atomic<bool>* cancel = nullptr);
+                       const std::atomic<bool>* cancel = nullptr,
+                       NoiseGainMemory* noise_gains = nullptr,
+                       bool reuse_noise_gains = false);
 
 /// Multiplies the edge weights of the links between two pixels that no input
 /// observes by `factor` (SolverSettings::hole_link_weight).
