@@ -116,6 +116,9 @@ struct Options {
   // --face-steps N: the face correction's steps (default: the solver's; 0 =
   // off).
   int face_steps = -1;
+  // --face-period N: frames without a face step after which a frame reserves
+  // time for one (default: the solver's; 0 = never).
+  int face_period = -1;
   // --busy-threads N: N threads that spin for the whole run, as other work
   // on the machine would (the solver gets the cores that are left over).
   int busy_threads = 0;
@@ -169,6 +172,8 @@ bool parseOptions(int argc, char** argv, Options* o) {
       o->refine = static_cast<int>(value);
     else if (key == "--face-steps")
       o->face_steps = static_cast<int>(value);
+    else if (key == "--face-period")
+      o->face_period = static_cast<int>(value);
     else if (key == "--refine-radius")
       o->refine_radius = static_cast<int>(value);
     else if (key == "--adaptive-threads")
@@ -240,6 +245,7 @@ RunSettings runSettings(const Options& o) {
   if (o.refine >= 0) live.warm_refine_iterations = o.refine;
   if (o.refine_radius >= 0) live.warm_refine_radius = o.refine_radius;
   if (o.face_steps >= 0) live.warm_face_steps = o.face_steps;
+  if (o.face_period >= 0) live.warm_face_period = o.face_period;
   live.adaptive_refine_threads = o.adaptive_threads == 1;
   if (o.cold_start_budget_ms >= 0.0) {
     live.cold_start_budget_ms = o.cold_start_budget_ms;

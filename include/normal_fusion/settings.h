@@ -174,6 +174,12 @@ struct SolverSettings {
   /// gathers and the local refinement does not reach. 0 = off.
   int warm_face_steps = settings_default::warm_face_steps;
   double warm_face_degrees = settings_default::warm_face_degrees;
+  /// Under a time budget the correction gets only the time the refinement
+  /// leaves, which on a slow core may be none for many frames while the
+  /// error it corrects gathers: a warm frame that follows warm_face_period
+  /// frames without a face step ends its refinement early enough for the
+  /// correction's set-up and one step. 0 = never.
+  int warm_face_period = settings_default::warm_face_period;
 
   // Iterations and stopping.
   int inner_iterations =

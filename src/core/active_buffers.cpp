@@ -247,6 +247,10 @@ void RefineThreadChooser::record(int threads,
   (threads == 1 ? cost_one_ : cost_all_) = seconds_per_pixel_iteration;
 }
 
+void RefineThreadChooser::shrink(int threads) {
+  (threads == 1 ? cost_one_ : cost_all_) *= kShrink;
+}
+
 void ActiveBuffers::normalizeCandidate() {
   for (int k = 0; k < num_active; ++k) {
     const float inv = 1.0f / std::sqrt(n[0][k] * n[0][k] + n[1][k] * n[1][k] +

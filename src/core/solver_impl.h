@@ -151,6 +151,12 @@ class SolverImpl {
   /// Local refinement of a warm start (SolverSettings::warm_refine_*):
   /// majorize-minimize on the active pixels, every other pixel fixed.
   void refineActive(const internal::PreparedLevel& level, SolveReport& report);
+  /// Sets the face correction's time estimates for this level's size and
+  /// thread count (kept while they stay the same).
+  void timeFacesFor(const internal::PreparedLevel& level);
+  /// What the refinement leaves for the face correction: its set-up and one
+  /// step with kFaceMargin when it is due (warm_face_period), else 0.
+  double faceReserveSeconds() const;
   /// The face correction after it (SolverSettings::warm_face_steps).
   void correctFaces(const internal::PreparedLevel& level, SolveReport& report);
 
@@ -221,6 +227,12 @@ class SolverImpl {
   double face_begin_fastest_ = 0.0;
   double face_step_fastest_ = 0.0;
   std::array<int, 3> face_timed_for_{{0, 0, 0}};
+  /// Warm frames since the correction last ran (its set-up and a step, or
+  /// a set-up that found no face): SolverSettings::warm_face_period.
+  int frames_without_face_step_ = 0;
+  /// This frame's refinement held time back for the correction's set-up
+  /// and first step, which then run without checking the deadline.
+  bool face_time_reserved_ = false;
   /// The safety factor on the correction's last times, what they shrink by
   /// on each frame that skips it, and the share of the budget it needs left
   /// before it is first timed.

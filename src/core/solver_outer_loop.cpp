@@ -252,16 +252,10 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
       };
   // Under a budget the correction takes only the time the refinement left
   // (what it leaves out does not count as the budget's: budget_exhausted
-  // stays the refinement's): it starts when its set-up and one step fit
-  // (their last times with kFaceMargin). Before they are timed they stand at
-  // kFaceFirstShare of the budget together, a step twice the set-up.
-  const std::array<int, 3> timed_for{{level.width, level.height, threads_}};
-  if (timed_for != face_timed_for_) {
-    // Times of another size or thread count say nothing of these.
-    face_timed_for_ = timed_for;
-    face_begin_seconds_ = face_step_seconds_ = 0.0;
-    face_begin_fastest_ = face_step_fastest_ = 0.0;
-  }
+  // stays the refinement's), or held back when the correction was due: it
+  // starts when its set-up and one step fit (their last times with
+  // kFaceMargin).
+  timeFacesFor(level);
   // A time measured, and the fastest one.
   auto timed = [](double seconds, double& last, double& fastest) {
     last = seconds;
@@ -271,19 +265,21 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
   auto shrink = [](double& estimate, double fastest) {
     estimate = std::max(fastest, estimate * kFaceEstimateDecay);
   };
-  if (face_begin_seconds_ == 0.0 && deadline_.active()) {
-    face_begin_seconds_ =
-        kFaceFirstShare * 1e-3 * settings_.time_budget_ms / (3.0 * kFaceMargin);
-    face_step_seconds_ = 2.0 * face_begin_seconds_;
-  }
-  if (!deadline_.fits(
-          start, kFaceMargin * (face_begin_seconds_ + face_step_seconds_))) {
+  // The time the refinement held back (there was room for it when the
+  // refinement began) is the set-up's and the first step's: they run
+  // without a check, which the refinement's closing could fail by a few
+  // microseconds.
+  const bool reserved = face_time_reserved_;
+  face_time_reserved_ = false;
+  if (!reserved && !deadline_.fits(start, kFaceMargin * (face_begin_seconds_ +
+                                                         face_step_seconds_))) {
     // Times of a slow phase or of a first call would keep it out for good;
     // shrunk on each frame it is skipped (down to the fastest seen, so that
     // a run of skipped frames does not let it start where it cannot end in
     // time), they are measured again later.
     shrink(face_begin_seconds_, face_begin_fastest_);
     shrink(face_step_seconds_, face_step_fastest_);
+    ++frames_without_face_step_;
     return;
   }
   const Clock::time_point begin_start = Clock::now();
@@ -296,7 +292,8 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
        ++k) {
     const Clock::time_point step_start = Clock::now();
     if (cancelled()) break;
-    if (!deadline_.fits(step_start, kFaceMargin * face_step_seconds_)) {
+    if (!(reserved && k == 0) &&
+        !deadline_.fits(step_start, kFaceMargin * face_step_seconds_)) {
       if (k == 0) shrink(face_step_seconds_, face_step_fastest_);
       break;
     }
@@ -315,9 +312,36 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
       face_step_seconds_ = std::max(step_seconds, face_step_fastest_);
     }
   }
+  // Ran: a step, or nothing to correct.
+  const bool ran = report.corrected_faces == 0 || report.face_steps > 0;
+  frames_without_face_step_ = ran ? 0 : frames_without_face_step_ + 1;
   report.face_energy_decrease =
       report.corrected_faces > 0 ? face_energy - faces_.energy() : 0.0;
   report.face_seconds = secondsSince(start);
+}
+
+void SolverImpl::timeFacesFor(const PreparedLevel& level) {
+  const std::array<int, 3> timed_for{{level.width, level.height, threads_}};
+  if (timed_for != face_timed_for_) {
+    // Times of another size or thread count say nothing of these.
+    face_timed_for_ = timed_for;
+    face_begin_seconds_ = face_step_seconds_ = 0.0;
+    face_begin_fastest_ = face_step_fastest_ = 0.0;
+  }
+  // Before they are timed they stand at kFaceFirstShare of the budget
+  // together, a step twice the set-up.
+  if (face_begin_seconds_ == 0.0 && deadline_.active()) {
+    face_begin_seconds_ =
+        kFaceFirstShare * 1e-3 * settings_.time_budget_ms / (3.0 * kFaceMargin);
+    face_step_seconds_ = 2.0 * face_begin_seconds_;
+  }
+}
+
+double SolverImpl::faceReserveSeconds() const {
+  const bool due = settings_.warm_face_steps > 0 &&
+                   settings_.warm_face_period > 0 && deadline_.active() &&
+                   frames_without_face_step_ >= settings_.warm_face_period;
+  return due ? kFaceMargin * (face_begin_seconds_ + face_step_seconds_) : 0.0;
 }
 
 void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
@@ -333,6 +357,12 @@ void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
       backend_->beginRefinement(level, terms, state_, refine_, threads_);
   int remaining = settings_.warm_refine_iterations;
   double step_seconds = 0.0;  // what the last outer step took
+  // The face correction's share when it is due (after it stood out too
+  // long), held back from the refinement's steps.
+  if (settings_.warm_face_steps > 0) timeFacesFor(level);
+  const double face_reserve_seconds = faceReserveSeconds();
+  face_time_reserved_ = face_reserve_seconds > 0.0 &&
+                        deadline_.fits(Clock::now(), face_reserve_seconds);
   // A cancel request ends it before a step, or inside one (the step is then
   // dropped: n0 holds the last accepted one).
   while (remaining > 0 && !cancelled()) {
@@ -349,8 +379,14 @@ void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
         measured ? std::max(step_seconds,
                             refine_threads_.cost(step_threads) * k * count)
                  : step_seconds;
-    if (!deadline_.allowsStep(step_start, expected_seconds)) {
+    if (!deadline_.allowsStep(step_start, expected_seconds) ||
+        !deadline_.fits(step_start, expected_seconds + face_reserve_seconds)) {
       report.budget_exhausted = true;
+      // No step this frame on a cost from an earlier one: it may be a
+      // stall's, which no later step would measure again.
+      if (measured && report.refine_iterations == 0) {
+        refine_threads_.shrink(step_threads);
+      }
       break;
     }
     // Inner iterations, then the candidate n / |n| at the active pixels and

@@ -586,5 +586,60 @@ TEST(FaceCorrection, WarmFrameReportsItsStepsAndEndsCloser) {
   EXPECT_LT(angle_with, converged_angle + 1.0) << converged_angle;
 }
 
+/// Under a budget that the local refinement uses up (it never converges:
+/// tolerance 0, more iterations than fit), the correction gets no time,
+/// unless it is due (warm_face_period): then the refinement ends early for it.
+TEST(FaceCorrection, DueCorrectionRunsWhenTheRefinementWouldTakeTheBudget) {
+  NormalMap gt;
+  const FusionProblem problem = test::twoPlanesTwoInputs(0.3, 0.2, &gt);
+  SolverState converged;
+  Solver(test::convergedSettings()).solve(problem, converged, false);
+  SolverState turned = converged;
+  const double axis[3] = {1.0, 0.0, 0.0};
+  for (std::size_t i = 0; i < turned.normals.pixelCount(); ++i) {
+    float v[3] = {turned.normals.plane(0)[i], turned.normals.plane(1)[i],
+                  turned.normals.plane(2)[i]};
+    turn(axis, 3.0, v);
+    for (int k = 0; k < 3; ++k) turned.normals.plane(k)[i] = v[k];
+  }
+  constexpr int kFrames = 6;
+  // The frames (of kFrames warm ones, one solver) that ran a face step.
+  auto framesWithSteps = [&](int period) {
+    SolverSettings settings;
+    settings.time_budget_ms = 30.0;
+    settings.warm_refine_iterations = 100000;
+    settings.relative_tolerance = 0.0;
+    settings.warm_face_period = period;
+    Solver solver(settings);
+    SolverState state = turned;
+    std::vector<int> frames;
+    for (int frame = 0; frame < kFrames; ++frame) {
+      const SolveReport report = solver.solve(problem, state, true);
+      test::expectUnit(state.normals);
+      EXPECT_GT(report.refine_iterations, 0) << "frame " << frame;
+      if (report.face_steps > 0) {
+        frames.push_back(frame);
+        EXPECT_GT(report.corrected_faces, 0) << "frame " << frame;
+      } else {
+        EXPECT_TRUE(report.budget_exhausted) << "frame " << frame;
+      }
+    }
+    return frames;
+  };
+  EXPECT_EQ(framesWithSteps(0), std::vector<int>{});
+  // Frames 0 and 1 leave it out and frame 2 holds time back for it; then at
+  // most two frames in a row without a step (a slow refinement step may
+  // leave time for one on another frame).
+  const std::vector<int> frames = framesWithSteps(2);
+  ASSERT_GE(frames.size(), 2u);
+  EXPECT_EQ(frames[0], 2);
+  int last = -1;
+  for (int frame : frames) {
+    EXPECT_LE(frame - last - 1, 2) << "frame " << frame;
+    last = frame;
+  }
+  EXPECT_LE(kFrames - last - 1, 2);
+}
+
 }  // namespace
 }  // namespace normal_fusion

@@ -290,6 +290,39 @@ TEST(RefineThreadChooser, RunsTheCheaperCountAndProbesTheOther) {
   EXPECT_EQ(ones_after, Chooser::kProbeInterval - 1);
 }
 
+/// A cost measured in a stall is not kept for good: each frame that takes no
+/// step on it lowers it, until a step runs and measures it again.
+TEST(RefineThreadChooser, ShrinksACostThatRefusesEveryStep) {
+  internal::RefineThreadChooser chooser;
+  chooser.reset(1);
+  chooser.record(1, 10e-9);
+  chooser.record(1, 10e-6);  // a step descheduled for a while
+  // A 5-iteration step of 10 000 pixels, 1 ms left in the frame: refused
+  // while the cost stays that high.
+  auto fits = [&] { return 5 * 10000 * chooser.cost(1) <= 1e-3; };
+  EXPECT_FALSE(fits());
+  int frames = 0;
+  while (!fits() && frames < 100) {
+    chooser.shrink(1);
+    ++frames;
+  }
+  EXPECT_LE(frames, 10);
+  EXPECT_NEAR(chooser.cost(1),
+              10e-6 * std::pow(internal::RefineThreadChooser::kShrink, frames),
+              1e-12);
+  // The next measurement replaces it.
+  chooser.record(1, 12e-9);
+  EXPECT_EQ(chooser.cost(1), 12e-9);
+  // Each count separately.
+  chooser.reset(2);
+  chooser.record(2, 8e-9);
+  chooser.record(1, 12e-9);
+  chooser.shrink(2);
+  EXPECT_EQ(chooser.cost(1), 12e-9);
+  EXPECT_NEAR(chooser.cost(2), 8e-9 * internal::RefineThreadChooser::kShrink,
+              1e-18);
+}
+
 /// Map edges: the pixels on both sides of a crease, not those next to an
 /// unknown pixel only, and never an unknown one.
 TEST(MarkMapEdges, MarksBothSidesOfACrease) {

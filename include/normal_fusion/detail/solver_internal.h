@@ -289,6 +289,13 @@ class RefineThreadChooser {
   /// The cost of a step that ran on `threads` threads: its seconds per pixel
   /// and iteration.
   void record(int threads, double seconds_per_pixel_iteration);
+  /// Lowers the cost of `threads` threads by kShrink: called when a frame's
+  /// refinement took no step because that cost did not fit. A cost measured
+  /// in a stall (the process descheduled in a step) would otherwise refuse
+  /// every later frame's first step, and with no step nothing measures it
+  /// again.
+  void shrink(int threads);
+  static constexpr double kShrink = 0.5;
   int maxThreads() const { return max_threads_; }
   /// The last cost per pixel-iteration measured with `threads` threads (1 or
   /// all), 0 when none was.
