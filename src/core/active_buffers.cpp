@@ -223,12 +223,19 @@ void RefineThreadChooser::reset(int max_threads) {
   steps_since_probe_ = 0;
 }
 
+int RefineThreadChooser::cheaper() const {
+  if (max_threads_ == 1 || cost_all_ == 0.0 || cost_one_ == 0.0) {
+    return max_threads_;
+  }
+  return cost_one_ < cost_all_ ? 1 : max_threads_;
+}
+
 int RefineThreadChooser::choose() {
   if (max_threads_ == 1) return 1;
   // Each count measured once before the costs decide.
   if (cost_all_ == 0.0) return max_threads_;
   if (cost_one_ == 0.0) return 1;
-  const int cheaper = cost_one_ < cost_all_ ? 1 : max_threads_;
+  const int cheaper = this->cheaper();
   // Every kProbeInterval-th step the other count, so that a change of the
   // machine's load is noticed.
   if (++steps_since_probe_ >= kProbeInterval) {

@@ -239,6 +239,9 @@ class SolverImpl {
   static constexpr double kFaceMargin = 1.25;
   static constexpr double kFaceEstimateDecay = 0.9;
   static constexpr double kFaceFirstShare = 0.3;
+  /// A due correction's time is held back only when the frame has this many
+  /// times it left where the refinement begins.
+  static constexpr double kFaceReserveRoom = 2.0;
 };
 
 }  // namespace normal_fusion

@@ -358,11 +358,16 @@ void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
   int remaining = settings_.warm_refine_iterations;
   double step_seconds = 0.0;  // what the last outer step took
   // The face correction's share when it is due (after it stood out too
-  // long), held back from the refinement's steps.
+  // long), held back from the refinement's steps when the frame has room
+  // for it and as much again for the refinement (else the refinement takes
+  // the frame, and a later one the correction: a refinement cut to a few
+  // iterations costs its frame more than a late correction).
   if (settings_.warm_face_steps > 0) timeFacesFor(level);
-  const double face_reserve_seconds = faceReserveSeconds();
-  face_time_reserved_ = face_reserve_seconds > 0.0 &&
-                        deadline_.fits(Clock::now(), face_reserve_seconds);
+  double face_reserve_seconds = faceReserveSeconds();
+  if (!deadline_.fits(Clock::now(), kFaceReserveRoom * face_reserve_seconds)) {
+    face_reserve_seconds = 0.0;
+  }
+  face_time_reserved_ = face_reserve_seconds > 0.0;
   // A cancel request ends it before a step, or inside one (the step is then
   // dropped: n0 holds the last accepted one).
   while (remaining > 0 && !cancelled()) {
@@ -370,21 +375,32 @@ void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {
     const int k = std::min(kRefineStepIterations, remaining);
     // One thread or all: whichever the last steps found cheaper (the same
     // result either way).
-    const int step_threads = measured && settings_.adaptive_refine_threads
-                                 ? refine_threads_.choose()
-                                 : threads_;
+    const bool adaptive = measured && settings_.adaptive_refine_threads;
+    int step_threads = adaptive ? refine_threads_.choose() : threads_;
     // What the step will take: the last step's time, or more if its thread
     // count was measured to cost more.
-    const double expected_seconds =
-        measured ? std::max(step_seconds,
-                            refine_threads_.cost(step_threads) * k * count)
-                 : step_seconds;
-    if (!deadline_.allowsStep(step_start, expected_seconds) ||
+    auto expectedSeconds = [&](int threads) {
+      return measured ? std::max(step_seconds,
+                                 refine_threads_.cost(threads) * k * count)
+                      : step_seconds;
+    };
+    double expected_seconds = expectedSeconds(step_threads);
+    if (adaptive && step_threads != refine_threads_.cheaper() &&
+        !deadline_.allowsStep(step_start, expected_seconds)) {
+      // A probe of the dearer count that does not fit: the cheaper count
+      // runs the step, and the probe's cost (perhaps a stall's, which only a
+      // probe measures again) is lowered.
+      refine_threads_.shrink(step_threads);
+      step_threads = refine_threads_.cheaper();
+      expected_seconds = expectedSeconds(step_threads);
+    }
+    const bool step_fits = deadline_.allowsStep(step_start, expected_seconds);
+    if (!step_fits ||
         !deadline_.fits(step_start, expected_seconds + face_reserve_seconds)) {
       report.budget_exhausted = true;
       // No step this frame on a cost from an earlier one: it may be a
       // stall's, which no later step would measure again.
-      if (measured && report.refine_iterations == 0) {
+      if (!step_fits && measured && report.refine_iterations == 0) {
         refine_threads_.shrink(step_threads);
       }
       break;

@@ -313,14 +313,19 @@ TEST(RefineThreadChooser, ShrinksACostThatRefusesEveryStep) {
   // The next measurement replaces it.
   chooser.record(1, 12e-9);
   EXPECT_EQ(chooser.cost(1), 12e-9);
-  // Each count separately.
+  // Each count separately; the cheaper count follows the costs (all
+  // threads until both are measured).
   chooser.reset(2);
-  chooser.record(2, 8e-9);
+  EXPECT_EQ(chooser.cheaper(), 2);
   chooser.record(1, 12e-9);
+  EXPECT_EQ(chooser.cheaper(), 2);
+  chooser.record(2, 20e-9);
+  EXPECT_EQ(chooser.cheaper(), 1);
   chooser.shrink(2);
   EXPECT_EQ(chooser.cost(1), 12e-9);
-  EXPECT_NEAR(chooser.cost(2), 8e-9 * internal::RefineThreadChooser::kShrink,
+  EXPECT_NEAR(chooser.cost(2), 20e-9 * internal::RefineThreadChooser::kShrink,
               1e-18);
+  EXPECT_EQ(chooser.cheaper(), 2);
 }
 
 /// Map edges: the pixels on both sides of a crease, not those next to an

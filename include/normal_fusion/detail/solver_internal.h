@@ -297,6 +297,9 @@ class RefineThreadChooser {
   void shrink(int threads);
   static constexpr double kShrink = 0.5;
   int maxThreads() const { return max_threads_; }
+  /// The count that choose() runs between probes (all threads until both
+  /// are measured).
+  int cheaper() const;
   /// The last cost per pixel-iteration measured with `threads` threads (1 or
   /// all), 0 when none was.
   double cost(int threads) const {
