@@ -48,11 +48,14 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
 
   // Cancelled before the levels start (a request made before the call, or
   // while the inputs are prepared): `out` is unchanged.
-  // A warm frame may use the inputs' noise gains of the frames before it.
-  const bool may_warm =
-      warm && out.compatible(problem.image.width(), problem.image.height(),
-                             static_cast<int>(problem.inputs.size()));
-  if (cancelled() || !prepare(problem, may_warm, report)) {
+  // A live frame (warm, under a time budget) may use the inputs' noise
+  // gains of the frames before it; without a budget every frame estimates
+  // its own, so that it solves the same E as its cold solve would.
+  const bool live_warm =
+      warm && settings_.time_budget_ms > 0.0 &&
+      out.compatible(problem.image.width(), problem.image.height(),
+                     static_cast<int>(problem.inputs.size()));
+  if (cancelled() || !prepare(problem, live_warm, report)) {
     finishCancelledBeforeStart(report, start);
     return;
   }
@@ -355,7 +358,8 @@ Solver& Solver::operator=(Solver&&) noexcept = default;
 void Solver::setSettings(const SolverSettings& settings) {
   settings.validate();
   impl_->settings_ = settings;
-  // Gains estimated under other settings (radii, model) are not these'.
+  // Gains estimated under other settings (radii, model) may not hold for
+  // these.
   impl_->noise_gains_.clear();
 }
 

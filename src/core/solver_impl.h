@@ -97,7 +97,7 @@ class SolverImpl {
   // solver.cpp: the solve.
 
   /// Prepares the finest level and checks it; false when cancelled meanwhile.
-  /// `warm`: a warm frame, which may use the kept noise gains.
+  /// `warm`: a live warm frame, which may use the kept noise gains.
   bool prepare(const FusionProblem& problem, bool warm, SolveReport& report);
   /// The coarser levels of a cold start (automatic: always when `budgeted`);
   /// returns how many levels there are.

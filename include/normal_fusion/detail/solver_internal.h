@@ -289,11 +289,11 @@ class RefineThreadChooser {
   /// The cost of a step that ran on `threads` threads: its seconds per pixel
   /// and iteration.
   void record(int threads, double seconds_per_pixel_iteration);
-  /// Lowers the cost of `threads` threads by kShrink: called when a frame's
-  /// refinement took no step because that cost did not fit. A cost measured
-  /// in a stall (the process descheduled in a step) would otherwise refuse
-  /// every later frame's first step, and with no step nothing measures it
-  /// again.
+  /// Lowers the cost of `threads` threads by kShrink: called when that cost
+  /// kept a step from running (a frame's first step, or a probe). A cost
+  /// measured in a stall (the process descheduled in a step) would
+  /// otherwise refuse those steps for good, and with no step nothing
+  /// measures it again.
   void shrink(int threads);
   static constexpr double kShrink = 0.5;
   int maxThreads() const { return max_threads_; }
@@ -511,10 +511,10 @@ void computeEdgeWeightsPassByPass(const ColorImage& image,
 /// terms' Huber thresholds and the edge weights (weakened inside holes).
 PreparedLevel prepareFinest(const FusionProblem& problem,
                             const SolverSettings& settings);
-/// Each input's noise gain (estimateNoise()) kept across a stream's warm
-/// frames: the gain describes the producer of an input (how far its errors
-/// are shared between pixels), which does not change from one frame to the
-/// next, while its estimate costs about 1 ms per input at 640x480.
+/// Each input's noise gain (estimateNoise()) kept across a stream's live
+/// (warm, budgeted) frames: the gain describes the producer of an input (how
+/// far its errors are shared between pixels), which does not change from one
+/// frame to the next, while its estimate costs about 1 ms per input at 640x480.
 struct NoiseGainMemory {
   /// Frames a kept gain is used for before it is estimated again.
   static constexpr int kFrames = 8;
