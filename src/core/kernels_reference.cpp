@@ -8,12 +8,18 @@
 namespace normal_fusion {
 namespace internal {
 
-void IterationState::resize(int width, int height, int num_inputs) {
+bool IterationState::resize(int width, int height, int num_inputs,
+                            const std::atomic<bool>* cancel) {
   for (PlanarImage* image : {&n0, &n, &nbar, &p_h, &p_v}) {
+    if (stopRequested(cancel)) return false;
     image->resizeKeepingCapacity(width, height, 3);
   }
   q.resize(num_inputs);
-  for (PlanarImage& q_l : q) q_l.resizeKeepingCapacity(width, height, 3);
+  for (PlanarImage& q_l : q) {
+    if (stopRequested(cancel)) return false;
+    q_l.resizeKeepingCapacity(width, height, 3);
+  }
+  return true;
 }
 
 void IterationState::fit(int width, int height, int threads) {

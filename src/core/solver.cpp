@@ -115,7 +115,13 @@ void SolverImpl::solve(const FusionProblem& problem, SolverState& out,
     }
     const Clock::time_point level_start = Clock::now();
     const PreparedLevel& level = levels_[li];
-    state_.resize(level.width, level.height, level.num_inputs);
+    // The buffers' first sizing (fresh memory) stops on a request too.
+    if (!state_.resize(level.width, level.height, level.num_inputs,
+                       &cancel_request_)) {
+      cancelled_ = true;
+      finishReport(report, start);
+      return;
+    }
     const bool warm_finest = li == 0 && use_warm;
     const bool from_coarser = li + 1 < num_levels;
     if (warm_finest) {
