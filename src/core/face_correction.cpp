@@ -96,11 +96,13 @@ void tangentEnergyGradient(const PreparedLevel& level, double huber_eps,
 }
 
 void FaceLabelScratch::reserve(std::size_t pixels, int height) {
-  run_start.reserve(pixels);
-  run_parent.reserve(pixels);
-  row_runs.reserve(static_cast<std::size_t>(height));
-  right.reserve(pixels);
-  down.reserve(pixels);
+  // Sized, so that their memory is touched here rather than in a live
+  // frame's first correction.
+  run_start.resize(std::max(run_start.size(), pixels));
+  run_parent.resize(std::max(run_parent.size(), pixels));
+  row_runs.resize(std::max(row_runs.size(), static_cast<std::size_t>(height)));
+  right.resize(std::max(right.size(), pixels));
+  down.resize(std::max(down.size(), pixels));
 }
 
 void FaceLabelScratch::fit(std::size_t pixels, int height) {
@@ -257,7 +259,7 @@ int labelFaces(const PlanarImage& normals, double degrees,
 
 void FaceCorrection::reserve(int width, int height, int threads) {
   const std::size_t N = static_cast<std::size_t>(width) * height;
-  label_.reserve(N);
+  label_.resize(std::max(label_.size(), N));
   label_scratch_.reserve(N, height);
   const std::size_t all_faces = N / kMinFacePixels + 1;
   face_size_.reserve(all_faces);
