@@ -330,8 +330,8 @@ class StreamRun {
   /// The stream's buffers reserved; then frame 0: solved to convergence
   /// before the stream starts (or, with --startup live, as a stream's first
   /// frame with the live settings, under cold_start_budget_ms), by the
-  /// stream itself, so that its buffers exist
-  /// once the stream runs (steady state).
+  /// stream itself, so that its buffers exist once the stream runs (steady
+  /// state).
   void startUp();
   /// Frame k >= 1: the live frame, then the measurements; one table row.
   void frame(int k);
