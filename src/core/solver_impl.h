@@ -218,10 +218,14 @@ class SolverImpl {
   /// The local refinement's thread count per step (kept across frames).
   internal::RefineThreadChooser refine_threads_;
   internal::FaceCorrection faces_;  ///< correctFaces()' state and buffers
-  /// What a face-correction set-up (faces and E) and step take (for the
-  /// budget), measured for one size and thread count (face_timed_for_).
-  internal::StepTimeEstimate face_begin_time_;
-  internal::StepTimeEstimate face_step_time_;
+  /// What the last face-correction set-up (faces and E) and step took (for
+  /// the budget; 0: not timed yet).
+  double face_begin_seconds_ = 0.0;
+  double face_step_seconds_ = 0.0;
+  /// The fastest of those times (0: none yet): the estimates never shrink
+  /// below them. Measured for one size and thread count (face_timed_for_).
+  double face_begin_fastest_ = 0.0;
+  double face_step_fastest_ = 0.0;
   std::array<int, 3> face_timed_for_{{0, 0, 0}};
   /// Warm frames since the correction last ran (its set-up and a step, or
   /// a set-up that found no face): SolverSettings::warm_face_period.
@@ -229,12 +233,12 @@ class SolverImpl {
   /// This frame's refinement held time back for the correction's set-up
   /// and first step, which then run without checking the deadline.
   bool face_time_reserved_ = false;
-  /// The safety factor on the correction's last times, the share of the
-  /// budget it needs left before it is first timed, and the frames without
-  /// a step after which its fastest times shrink too (StepTimeEstimate).
+  /// The safety factor on the correction's last times, what they shrink by
+  /// on each frame that skips it, and the share of the budget it needs left
+  /// before it is first timed.
   static constexpr double kFaceMargin = 1.25;
+  static constexpr double kFaceEstimateDecay = 0.9;
   static constexpr double kFaceFirstShare = 0.3;
-  static constexpr int kFaceLongOutFrames = 16;
   /// A due correction's time is held back only when the frame has this many
   /// times it left where the refinement begins.
   static constexpr double kFaceReserveRoom = 2.0;

@@ -256,29 +256,36 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
   // starts when its set-up and one step fit (their last times with
   // kFaceMargin).
   timeFacesFor(level);
-  // This frame without a step would leave the correction out long.
-  const bool long_out = frames_without_face_step_ + 1 >= kFaceLongOutFrames;
+  // A time measured, and the fastest one.
+  auto timed = [](double seconds, double& last, double& fastest) {
+    last = seconds;
+    fastest = fastest > 0.0 ? std::min(fastest, seconds) : seconds;
+  };
+  // An estimate shrunk on a skipped frame, never below the fastest time.
+  auto shrink = [](double& estimate, double fastest) {
+    estimate = std::max(fastest, estimate * kFaceEstimateDecay);
+  };
   // The time the refinement held back (there was room for it when the
   // refinement began) is the set-up's and the first step's: they run
   // without a check, which the refinement's closing could fail by a few
   // microseconds.
   const bool reserved = face_time_reserved_;
   face_time_reserved_ = false;
-  if (!reserved &&
-      !deadline_.fits(start, kFaceMargin * (face_begin_time_.seconds() +
-                                            face_step_time_.seconds()))) {
+  if (!reserved && !deadline_.fits(start, kFaceMargin * (face_begin_seconds_ +
+                                                         face_step_seconds_))) {
     // Times of a slow phase or of a first call would keep it out for good;
-    // shrunk on each frame it is skipped (StepTimeEstimate), they are
-    // measured again later.
-    face_begin_time_.skipped(long_out);
-    face_step_time_.skipped(long_out);
+    // shrunk on each frame it is skipped (down to the fastest seen, so that
+    // a run of skipped frames does not let it start where it cannot end in
+    // time), they are measured again later.
+    shrink(face_begin_seconds_, face_begin_fastest_);
+    shrink(face_step_seconds_, face_step_fastest_);
     ++frames_without_face_step_;
     return;
   }
   const Clock::time_point begin_start = Clock::now();
   report.corrected_faces =
       faces_.begin(state_.n0, settings_.warm_face_degrees, energy_of, threads_);
-  face_begin_time_.measured(secondsSince(begin_start));
+  timed(secondsSince(begin_start), face_begin_seconds_, face_begin_fastest_);
   const double face_energy = faces_.energy();
   // Each step is kept only when E falls.
   for (int k = 0; k < settings_.warm_face_steps && report.corrected_faces > 0;
@@ -286,8 +293,8 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
     const Clock::time_point step_start = Clock::now();
     if (cancelled()) break;
     if (!(reserved && k == 0) &&
-        !deadline_.fits(step_start, kFaceMargin * face_step_time_.seconds())) {
-      if (k == 0) face_step_time_.skipped(long_out);
+        !deadline_.fits(step_start, kFaceMargin * face_step_seconds_)) {
+      if (k == 0) shrink(face_step_seconds_, face_step_fastest_);
       break;
     }
     const bool kept = faces_.step(level, terms.huber_eps, terms.penalty,
@@ -300,9 +307,9 @@ void SolverImpl::correctFaces(const PreparedLevel& level, SolveReport& report) {
     // would set the floor below a whole step's time.
     const double step_seconds = secondsSince(step_start);
     if (kept) {
-      face_step_time_.measured(step_seconds);
+      timed(step_seconds, face_step_seconds_, face_step_fastest_);
     } else {
-      face_step_time_.measuredPartial(step_seconds);
+      face_step_seconds_ = std::max(step_seconds, face_step_fastest_);
     }
   }
   // Ran: a step, or nothing to correct.
@@ -318,16 +325,15 @@ void SolverImpl::timeFacesFor(const PreparedLevel& level) {
   if (timed_for != face_timed_for_) {
     // Times of another size or thread count say nothing of these.
     face_timed_for_ = timed_for;
-    face_begin_time_.reset();
-    face_step_time_.reset();
+    face_begin_seconds_ = face_step_seconds_ = 0.0;
+    face_begin_fastest_ = face_step_fastest_ = 0.0;
   }
   // Before they are timed they stand at kFaceFirstShare of the budget
   // together, a step twice the set-up.
-  if (face_begin_time_.seconds() == 0.0 && deadline_.active()) {
-    const double begin_seconds =
+  if (face_begin_seconds_ == 0.0 && deadline_.active()) {
+    face_begin_seconds_ =
         kFaceFirstShare * 1e-3 * settings_.time_budget_ms / (3.0 * kFaceMargin);
-    face_begin_time_.guess(begin_seconds);
-    face_step_time_.guess(2.0 * begin_seconds);
+    face_step_seconds_ = 2.0 * face_begin_seconds_;
   }
 }
 
@@ -335,9 +341,7 @@ double SolverImpl::faceReserveSeconds() const {
   const bool due = settings_.warm_face_steps > 0 &&
                    settings_.warm_face_period > 0 && deadline_.active() &&
                    frames_without_face_step_ >= settings_.warm_face_period;
-  return due ? kFaceMargin *
-                   (face_begin_time_.seconds() + face_step_time_.seconds())
-             : 0.0;
+  return due ? kFaceMargin * (face_begin_seconds_ + face_step_seconds_) : 0.0;
 }
 
 void SolverImpl::refineActive(const PreparedLevel& level, SolveReport& report) {

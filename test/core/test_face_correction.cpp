@@ -669,35 +669,5 @@ TEST(FaceCorrection, ReserveSizesTheLabelBuffers) {
   EXPECT_EQ(scratch.run_start.data(), run_start);
 }
 
-/// A step's time estimate shrinks on each frame that leaves the step out,
-/// not below the fastest time measured; once the step stays out long, the
-/// fastest time (perhaps a stall's) shrinks too, so that the step runs and
-/// is measured again.
-TEST(FaceCorrection, StepTimeEstimateForgetsAStalledTimeWhenLongOut) {
-  internal::StepTimeEstimate time;
-  EXPECT_EQ(time.seconds(), 0.0);
-  time.guess(0.004);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.004);
-  time.measured(0.020);  // a stall's time, the only one measured
-  for (int frame = 0; frame < 30; ++frame) time.skipped(false);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.020);
-  for (int frame = 0; frame < 13; ++frame) time.skipped(true);
-  EXPECT_NEAR(time.seconds(), 0.020 * std::pow(0.9, 13), 1e-12);
-  // Measured again: the new time, the floor the lower one.
-  time.measured(0.005);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.005);
-  time.measured(0.007);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.007);
-  for (int frame = 0; frame < 30; ++frame) time.skipped(false);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.005);
-  // A run that may have ended early sets no floor.
-  time.measuredPartial(0.001);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.005);
-  time.measuredPartial(0.009);
-  EXPECT_DOUBLE_EQ(time.seconds(), 0.009);
-  time.reset();
-  EXPECT_EQ(time.seconds(), 0.0);
-}
-
 }  // namespace
 }  // namespace normal_fusion

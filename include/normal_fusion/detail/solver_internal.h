@@ -2,7 +2,6 @@
 // backends. Not part of the stable API; exposed for the unit tests.
 #pragma once
 
-#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
@@ -316,41 +315,6 @@ class RefineThreadChooser {
   double cost_one_ = 0.0;  ///< 0: not measured yet
   double cost_all_ = 0.0;
   int steps_since_probe_ = 0;
-};
-
-/// The time of a step that runs only where it fits (the face correction's
-/// set-up and its step): the last time measured, never below the fastest
-/// one (a run of frames that left the step out must not let it start where
-/// it cannot end), shrunk by kDecay on each frame that left it out. Once the
-/// step has stayed out long (`long_out`) the fastest time shrinks too: it
-/// may be a stall's or a first call's, and since only a run measures again,
-/// it would otherwise keep the step out for good.
-class StepTimeEstimate {
- public:
-  static constexpr double kDecay = 0.9;
-  /// Seconds; 0 until measured or guessed.
-  double seconds() const { return seconds_; }
-  /// The estimate before the first measurement.
-  void guess(double seconds) { seconds_ = seconds; }
-  /// A whole run took `seconds`.
-  void measured(double seconds) {
-    seconds_ = seconds;
-    fastest_ = fastest_ > 0.0 ? std::min(fastest_, seconds) : seconds;
-  }
-  /// A run that may have ended early took `seconds`: no floor from it.
-  void measuredPartial(double seconds) {
-    seconds_ = std::max(seconds, fastest_);
-  }
-  /// A frame left the step out.
-  void skipped(bool long_out) {
-    if (long_out) fastest_ *= kDecay;
-    seconds_ = std::max(fastest_, seconds_ * kDecay);
-  }
-  void reset() { seconds_ = fastest_ = 0.0; }
-
- private:
-  double seconds_ = 0.0;
-  double fastest_ = 0.0;  ///< 0: none measured
 };
 
 /// runInnerActive() on gathered buffers: the same steps on contiguous
